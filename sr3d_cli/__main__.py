@@ -1,0 +1,3 @@
+from sr3d_cli.cli import main
+
+main()

@@ -1,0 +1,203 @@
+"""One configuration for every stage: dataclasses with defaults, YAML files, ``--set`` overrides.
+
+Precedence, lowest first: built-in defaults < YAML file < ``--set section.key=value`` < explicit
+command-line flags. Unknown sections or keys and values of the wrong type raise
+:class:`~sr3d_cli.errors.ConfigError` naming the key and where it came from.
+``configs/default.yaml`` lists every key with a comment; a test keeps it equal to these defaults.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+from sr3d_cli.errors import ConfigError
+
+
+@dataclass
+class IOConfig:
+    format: str = "auto"
+    camera: str = ""
+    depth_scale: float = 0.001
+    min_median_depth: float = 0.05
+    max_median_depth: float = 20.0
+
+
+@dataclass
+class RenderConfig:
+    backend: str = "auto"
+
+
+@dataclass
+class SynthConfig:
+    scenes: int = 4
+    views: int = 1
+    seed: int = 0
+    resolutions: list[str] = field(default_factory=lambda: ["640x480", "848x480"])
+    objects: list[int] = field(default_factory=lambda: [1, 3])
+    distractors: list[int] = field(default_factory=lambda: [0, 2])
+    distance: list[float] = field(default_factory=lambda: [0.35, 0.9])
+    elevation_deg: list[float] = field(default_factory=lambda: [25.0, 75.0])
+    lying_fraction: float = 0.3
+    depth_scale: float = 0.001
+    hole_fraction: list[float] = field(default_factory=lambda: [0.1, 0.8])
+    see_through_fraction: list[float] = field(default_factory=lambda: [0.1, 0.7])
+    noise_opaque: float = 0.0015
+    noise_glass: float = 0.004
+    max_range: float = 3.0
+
+
+@dataclass
+class EvaluateConfig:
+    pred: list[str] = field(default_factory=lambda: ["repaired"])
+    holes: str = "full"
+    mask: str = "auto"
+    plot: bool = False
+    plot_max_error: float = 0.05
+
+
+@dataclass
+class Config:
+    io: IOConfig = field(default_factory=IOConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)
+    synth: SynthConfig = field(default_factory=SynthConfig)
+    evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
+
+
+CHOICES: dict[str, tuple[str, ...]] = {
+    "io.format": ("auto", "native", "cleargrasp"),
+    "render.backend": ("auto", "pyrender", "numpy"),
+    "evaluate.holes": ("full", "ignore"),
+    "evaluate.mask": ("auto", "gt", "pred"),
+}
+
+
+def _coerce(value: Any, annotation: Any, key: str, origin: str) -> Any:
+    """Check ``value`` against a field annotation; return it converted (int -> float only)."""
+    where = f"'{key}' in {origin}"
+    if annotation is bool:
+        if isinstance(value, bool):
+            return value
+        raise ConfigError(f"{where}: expected true/false, got {value!r}")
+    if annotation is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        raise ConfigError(f"{where}: expected an integer, got {value!r}")
+    if annotation is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise ConfigError(f"{where}: expected a number, got {value!r}")
+    if annotation is str:
+        if isinstance(value, str):
+            return value
+        raise ConfigError(f"{where}: expected a string, got {value!r}")
+    if typing.get_origin(annotation) is list:
+        (item_type,) = typing.get_args(annotation)
+        if isinstance(value, str) and item_type is str:  # "a,b" from --set or a flag
+            value = [v.strip() for v in value.split(",") if v.strip()]
+        if not isinstance(value, list):
+            raise ConfigError(f"{where}: expected a list, got {value!r}")
+        return [_coerce(v, item_type, key, origin) for v in value]
+    raise ConfigError(f"{where}: unsupported type {annotation!r}")  # pragma: no cover
+
+
+def _section_types(section_cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(section_cls)
+
+
+def apply_mapping(cfg: Config, data: Mapping[str, Any], origin: str) -> Config:
+    """Return a copy of ``cfg`` with ``data`` ({section: {key: value}}) applied, checked."""
+    if data is None:
+        return cfg
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{origin}: expected a mapping of sections, got {type(data).__name__}")
+    cfg = dataclasses.replace(cfg)
+    for section, values in data.items():
+        if section not in {f.name for f in dataclasses.fields(Config)}:
+            raise ConfigError(f"unknown section '{section}' in {origin}")
+        if values is None:
+            continue
+        if not isinstance(values, Mapping):
+            raise ConfigError(f"section '{section}' in {origin}: expected a mapping")
+        current = getattr(cfg, section)
+        hints = _section_types(type(current))
+        updates = {}
+        for key, value in values.items():
+            full = f"{section}.{key}"
+            if key not in hints:
+                raise ConfigError(f"unknown key '{full}' in {origin}")
+            value = _coerce(value, hints[key], full, origin)
+            if full in CHOICES and value not in CHOICES[full]:
+                raise ConfigError(
+                    f"'{full}' in {origin}: {value!r} is not one of {', '.join(CHOICES[full])}"
+                )
+            updates[key] = value
+        setattr(cfg, section, dataclasses.replace(current, **updates))
+    return cfg
+
+
+def parse_set(item: str) -> tuple[str, str, Any]:
+    """Split ``section.key=value``; the value is parsed as YAML (so 0.5, true, [1, 2] work)."""
+    key, sep, raw = item.partition("=")
+    section, dot, name = key.strip().partition(".")
+    if not sep or not dot or not section or not name:
+        raise ConfigError(f"--set {item!r}: expected section.key=value")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else ""
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"--set {item!r}: value is not valid YAML ({exc})") from None
+    return section, name, value
+
+
+def load_yaml(path: str | Path) -> dict:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read config file ({exc.strerror or exc})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: config file is not UTF-8 text") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: config file is not valid YAML ({exc})") from None
+    return data or {}
+
+
+def build_config(
+    path: str | Path | None = None,
+    sets: typing.Iterable[str] = (),
+    flags: Mapping[str, Any] | None = None,
+) -> Config:
+    """Defaults, then the YAML file, then ``--set`` items, then explicit flags (None = not given).
+
+    Parameters
+    ----------
+    path : path, optional
+        YAML file of ``{section: {key: value}}``.
+    sets : iterable of str
+        ``section.key=value`` items, applied in order.
+    flags : mapping of 'section.key' -> value, optional
+        Values of command-line flags; ``None`` means the flag was not given.
+    """
+    cfg = Config()
+    if path is not None:
+        cfg = apply_mapping(cfg, load_yaml(path), str(path))
+    for item in sets:
+        section, name, value = parse_set(item)
+        cfg = apply_mapping(cfg, {section: {name: value}}, "--set")
+    for full, value in (flags or {}).items():
+        if value is None:
+            continue
+        section, _, name = full.partition(".")
+        cfg = apply_mapping(cfg, {section: {name: value}}, "the command line")
+    return cfg
+
+
+def to_dict(cfg: Config) -> dict:
+    return dataclasses.asdict(cfg)

@@ -1,0 +1,103 @@
+"""Depth metrics over transparent-object pixels, as ClearGrasp (Sajjan et al., ICRA 2020) and
+TransCG (Fang et al., RA-L 2022) report them.
+
+Counted pixels: inside the object mask and where the ground truth is valid (finite, > 0).
+Holes in the prediction (0 / NaN) either count with full error, the prediction taken as 0 as
+ClearGrasp does (``holes="full"``), or are left out (``holes="ignore"``); ``coverage`` is the
+share of counted pixels where the prediction is valid, so both readings can be reconstructed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+METRICS = ("rmse", "rel", "mae", "delta_1.05", "delta_1.10", "delta_1.25")
+DELTAS = {"delta_1.05": 1.05, "delta_1.10": 1.10, "delta_1.25": 1.25}
+HOLES_NOTE = {
+    "full": "holes in the prediction count with full error (prediction taken as 0, as ClearGrasp)",
+    "ignore": "only pixels where the prediction is valid are counted",
+}
+
+
+def depth_metrics(pred_m: np.ndarray, gt_m: np.ndarray, mask: np.ndarray, *,
+                  holes: str = "full") -> dict[str, float]:
+    """Error of a depth prediction against ground truth over a mask.
+
+    Parameters
+    ----------
+    pred_m, gt_m : (H, W) float ndarray
+        Predicted and true depth in metres; 0 or non-finite means no value.
+    mask : (H, W) bool or int ndarray
+        Pixels to evaluate (non-zero), e.g. the transparent objects.
+    holes : {"full", "ignore"}
+        How pixels without a prediction are treated (see module doc).
+
+    Returns
+    -------
+    dict
+        ``rmse``, ``mae`` (metres), ``rel`` (mean |e| / gt), ``delta_1.05`` ... (percent of
+        pixels with max(pred/gt, gt/pred) below the threshold), ``pixels`` (counted),
+        ``coverage`` (share of mask-and-valid-gt pixels with a prediction). Metrics are NaN when
+        no pixel is counted.
+    """
+    if holes not in HOLES_NOTE:
+        raise ValueError(f"holes must be 'full' or 'ignore', got {holes!r}")
+    pred = np.asarray(pred_m, dtype=np.float64)
+    gt = np.asarray(gt_m, dtype=np.float64)
+    if pred.shape != gt.shape or np.shape(mask) != gt.shape:
+        raise ValueError(f"shapes differ: pred {pred.shape}, gt {gt.shape}, mask {np.shape(mask)}")
+    base = (np.asarray(mask) != 0) & np.isfinite(gt) & (gt > 0)
+    pred_valid = np.isfinite(pred) & (pred > 0)
+    n_base = int(base.sum())
+    coverage = float((base & pred_valid).sum() / n_base) if n_base else math.nan
+    sel = base & pred_valid if holes == "ignore" else base
+    p = np.where(pred_valid, pred, 0.0)[sel]
+    g = gt[sel]
+    out: dict[str, float] = {"pixels": int(sel.sum()), "coverage": coverage}
+    if g.size == 0:
+        out.update({k: math.nan for k in METRICS})
+        return out
+    err = p - g
+    out["rmse"] = float(np.sqrt(np.mean(err ** 2)))
+    out["mae"] = float(np.mean(np.abs(err)))
+    out["rel"] = float(np.mean(np.abs(err) / g))
+    with np.errstate(divide="ignore"):
+        ratio = np.maximum(np.where(p > 0, p / g, np.inf), np.where(p > 0, g / p, np.inf))
+    for name, thr in DELTAS.items():
+        out[name] = float(100.0 * np.mean(ratio < thr))
+    return out
+
+
+def mean_metrics(rows: list[dict[str, float]]) -> dict[str, float]:
+    """Average of per-frame metrics over the frames that counted any pixel (``frames``: how many)."""
+    used = [r for r in rows if r.get("pixels", 0) > 0]
+    out: dict[str, float] = {"frames": len(used)}
+    for key in METRICS + ("coverage",):
+        values = [r[key] for r in used if not math.isnan(r[key])]
+        out[key] = float(np.mean(values)) if values else math.nan
+    out["pixels"] = int(sum(r["pixels"] for r in used))
+    return out
+
+
+def error_map_image(pred_m: np.ndarray, gt_m: np.ndarray, mask: np.ndarray, *,
+                    max_error: float = 0.05) -> np.ndarray:
+    """Colour picture of |pred - gt| inside the mask: ``(H, W, 3) uint8`` RGB.
+
+    Error 0 is dark blue and ``max_error`` (metres) or more is red (OpenCV's JET scale); pixels
+    outside the mask or without ground truth are dark grey, holes in the prediction magenta.
+    """
+    import cv2
+
+    pred = np.asarray(pred_m, dtype=np.float64)
+    gt = np.asarray(gt_m, dtype=np.float64)
+    base = (np.asarray(mask) != 0) & np.isfinite(gt) & (gt > 0)
+    hole = base & ~(np.isfinite(pred) & (pred > 0))
+    err = np.abs(np.nan_to_num(pred) - np.nan_to_num(gt))
+    level = np.clip(err / max_error, 0, 1) * 255
+    colour = cv2.applyColorMap(level.astype(np.uint8), cv2.COLORMAP_JET)[..., ::-1]
+    image = np.full(gt.shape + (3,), 40, dtype=np.uint8)
+    image[base] = colour[base]
+    image[hole] = (255, 0, 255)
+    return image

@@ -1,0 +1,1 @@
+"""Camera model, rigid transforms, support-plane fitting."""

@@ -1,0 +1,104 @@
+"""Pinhole camera in OpenCV's convention: x right, y down, z forward; depth is Z, not ray length."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Intrinsics of one capture session.
+
+    K : (3, 3) float64 pixel intrinsics, pixel centres at integer coordinates.
+    width, height : image size in pixels the intrinsics belong to (0 = not known yet).
+    depth_scale : metres per unit of integer depth files.
+    """
+
+    K: np.ndarray
+    width: int
+    height: int
+    depth_scale: float = 0.001
+    source: str = field(default="", compare=False)
+
+    def __post_init__(self):
+        K = np.asarray(self.K, dtype=np.float64)
+        if K.shape != (3, 3):
+            raise ValueError(f"K must be 3x3, got {K.shape}")
+        if not (K[0, 0] > 0 and K[1, 1] > 0):
+            raise ValueError("focal lengths must be positive")
+        if self.width < 0 or self.height < 0:
+            raise ValueError("image size must not be negative")
+        if not self.depth_scale > 0:
+            raise ValueError("depth_scale must be positive")
+        object.__setattr__(self, "K", K)
+
+    @property
+    def fx(self) -> float:
+        return float(self.K[0, 0])
+
+    @property
+    def fy(self) -> float:
+        return float(self.K[1, 1])
+
+    @property
+    def cx(self) -> float:
+        return float(self.K[0, 2])
+
+    @property
+    def cy(self) -> float:
+        return float(self.K[1, 2])
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.height, self.width)
+
+    def scaled(self, width: int, height: int) -> "Camera":
+        """Intrinsics for the same camera with images resized to ``width`` x ``height``."""
+        sx, sy = width / self.width, height / self.height
+        K = self.K.copy()
+        K[0, :] *= sx
+        K[1, :] *= sy
+        # pixel centres sit at integer coordinates: c' = (c + 0.5) * s - 0.5
+        K[0, 2] = (self.K[0, 2] + 0.5) * sx - 0.5
+        K[1, 2] = (self.K[1, 2] + 0.5) * sy - 0.5
+        return Camera(K, width, height, self.depth_scale, self.source)
+
+    def to_json(self) -> dict:
+        return {"K": self.K.tolist(), "width": self.width, "height": self.height,
+                "depth_scale": self.depth_scale}
+
+
+def project(points_cam: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Camera-frame points ``(n, 3)`` metres to pixels ``(n, 2)`` (u right, v down)."""
+    points_cam = np.asarray(points_cam, dtype=np.float64)
+    z = points_cam[:, 2:3]
+    uv = (points_cam[:, :2] / z) * np.array([K[0, 0], K[1, 1]]) + np.array([K[0, 2], K[1, 2]])
+    return uv
+
+
+def unproject(uv: np.ndarray, depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Pixels ``(n, 2)`` with depths ``(n,)`` metres to camera-frame points ``(n, 3)``."""
+    uv = np.asarray(uv, dtype=np.float64)
+    z = np.asarray(depth_m, dtype=np.float64)
+    x = (uv[:, 0] - K[0, 2]) / K[0, 0] * z
+    y = (uv[:, 1] - K[1, 2]) / K[1, 1] * z
+    return np.stack([x, y, z], axis=1)
+
+
+def depth_to_points(depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Depth image ``(H, W)`` to a point image ``(H, W, 3)`` in the camera frame (0 where empty)."""
+    h, w = depth_m.shape
+    v, u = np.mgrid[0:h, 0:w]
+    z = depth_m.astype(np.float64)
+    x = (u - K[0, 2]) / K[0, 0] * z
+    y = (v - K[1, 2]) / K[1, 1] * z
+    return np.stack([x, y, z], axis=-1)
+
+
+def pixel_rays(shape: tuple[int, int], K: np.ndarray) -> np.ndarray:
+    """Ray directions ``(H, W, 3)`` with z = 1 through every pixel centre."""
+    h, w = shape
+    v, u = np.mgrid[0:h, 0:w]
+    return np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones((h, w))], axis=-1)

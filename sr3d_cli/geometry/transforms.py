@@ -1,0 +1,53 @@
+"""Rigid transforms. ``T_a_b`` maps points from frame b into frame a: ``p_a = T_a_b @ p_b``."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def make_T(R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = np.asarray(t, dtype=np.float64).reshape(3)
+    return T
+
+
+def apply_T(T: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a 4x4 transform to points ``(n, 3)``."""
+    return np.asarray(points, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+
+
+def place_points(points_obj: np.ndarray, T_cam_obj: np.ndarray, scale: float) -> np.ndarray:
+    """Object-frame (unit-free) points to the camera frame: ``R @ (scale * p) + t``."""
+    return apply_T(T_cam_obj, scale * np.asarray(points_obj, dtype=np.float64))
+
+
+def rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation matrix of ``angle`` radians about ``axis`` (Rodrigues)."""
+    axis = np.asarray(axis, dtype=np.float64)
+    axis = axis / np.linalg.norm(axis)
+    x, y, z = axis
+    K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """``T_world_cam`` of an OpenCV camera at ``eye`` looking at ``target`` (image up ~ ``up``)."""
+    eye, target, up = (np.asarray(a, dtype=np.float64) for a in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)  # right = forward x up (with y pointing down)
+    if np.linalg.norm(x) < 1e-9:
+        x = np.cross(z, np.array([1.0, 0.0, 0.0]))
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return make_T(np.stack([x, y, z], axis=1), eye)
+
+
+def is_rigid(T: np.ndarray, tol: float = 1e-6) -> bool:
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        return False
+    R = T[:3, :3]
+    return (np.allclose(R @ R.T, np.eye(3), atol=tol) and abs(np.linalg.det(R) - 1) < tol
+            and np.allclose(T[3], [0, 0, 0, 1], atol=tol))

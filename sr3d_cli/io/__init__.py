@@ -1,0 +1,1 @@
+"""Reading and writing files: scene folders, format adapters, camera files, atomic writers."""

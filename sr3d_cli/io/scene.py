@@ -1,0 +1,185 @@
+"""Scene folders: where each input lives and where each stage writes, for every layout.
+
+A :class:`SceneSource` answers "which frames are there" and "where is file X of frame F"; the
+readers in :mod:`sr3d_cli.io.images` do the decoding. Layout quirks live in subclasses
+(:mod:`sr3d_cli.io.formats`). Outputs always go to the native layout under ``out``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sr3d_cli.config import IOConfig
+from sr3d_cli.errors import InputError
+from sr3d_cli.geometry.camera import Camera
+from sr3d_cli.io import images
+from sr3d_cli.io.camera_files import fit_camera_to_image, load_camera
+from sr3d_cli.io.frames import sort_ids
+
+log = logging.getLogger("sr3d")
+
+
+@dataclass
+class Frame:
+    """One RGB-D frame, checked for consistency.
+
+    rgb : (H, W, 3) uint8 RGB.
+    depth_m : (H, W) float32 raw sensor depth, metres, 0 = no reading.
+    camera : intrinsics matching (H, W).
+    """
+
+    scene: "SceneSource"
+    frame_id: str
+    rgb: np.ndarray
+    depth_m: np.ndarray
+    camera: Camera
+
+    @property
+    def key(self) -> str:
+        return self.scene.frame_key(self.frame_id)
+
+
+class SceneSource:
+    """A native scene folder (see DESIGN.md, "Scene folder")."""
+
+    layout = "native"
+    split_binary_masks = False
+    CAMERA_NAMES = ("camera.json", "camera.yaml", "camera_info.yaml", "camera_intrinsics.yaml",
+                    "intrinsics.json", "K.txt", "K.npy")
+
+    def __init__(self, root: Path, *, out: Path | None = None, name: str = "",
+                 io: IOConfig | None = None):
+        self.root = Path(root)
+        self.out = Path(out) if out is not None else self.root
+        self.name = name
+        self.io = io or IOConfig()
+        self._camera: Camera | None = None
+        self._notices: set[str] = set()
+
+    # ---- naming -----------------------------------------------------------------------------
+    def frame_key(self, frame_id: str) -> str:
+        return f"{self.name}/{frame_id}" if self.name else frame_id
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({str(self.root)!r})"
+
+    # ---- inputs -----------------------------------------------------------------------------
+    def frame_ids(self) -> list[str]:
+        folder = self.root / "rgb"
+        return sort_ids(p.stem for p in folder.iterdir()
+                        if p.is_file() and p.suffix.lower() in images.RGB_SUFFIXES
+                        and not p.name.startswith("."))
+
+    def _find(self, folder: Path, frame_id: str, suffixes) -> Path | None:
+        for suffix in suffixes:
+            p = folder / f"{frame_id}{suffix}"
+            if p.is_file():
+                return p
+        return None
+
+    def rgb_path(self, frame_id: str) -> Path:
+        return self._find(self.root / "rgb", frame_id, images.RGB_SUFFIXES) or \
+            self.root / "rgb" / f"{frame_id}.png"
+
+    def depth_path(self, frame_id: str) -> Path:
+        return self._find(self.root / "depth", frame_id, images.DEPTH_SUFFIXES) or \
+            self.root / "depth" / f"{frame_id}.png"
+
+    def gt_depth_path(self, frame_id: str) -> Path | None:
+        return self._find(self.root / "gt" / "depth", frame_id, images.DEPTH_SUFFIXES)
+
+    def gt_mask_path(self, frame_id: str) -> Path | None:
+        return self._find(self.root / "gt" / "masks", frame_id, (".png",))
+
+    def gt_objects_path(self, frame_id: str) -> Path | None:
+        return self._find(self.root / "gt" / "objects", frame_id, (".json",))
+
+    def camera_path(self) -> Path:
+        if self.io.camera:
+            return Path(self.io.camera)
+        for name in self.CAMERA_NAMES:
+            if (self.root / name).is_file():
+                return self.root / name
+        return self.root / self.CAMERA_NAMES[0]
+
+    @property
+    def camera(self) -> Camera:
+        """Intrinsics as found in the scene (size not yet matched to the images)."""
+        if self._camera is None:
+            self._camera = load_camera(self.camera_path(), self.io.depth_scale)
+        return self._camera
+
+    # ---- outputs ----------------------------------------------------------------------------
+    def output_path(self, stage: str, frame_id: str, suffix: str = ".png") -> Path:
+        return self.out / stage / f"{frame_id}{suffix}"
+
+    # ---- loading ----------------------------------------------------------------------------
+    def _notice(self, message: str | None) -> None:
+        if message and message not in self._notices:
+            self._notices.add(message)
+            log.warning("notice: %s", message)
+
+    def read_depth_checked(self, path: Path, shape: tuple[int, int] | None = None) -> np.ndarray:
+        """Read a depth file, check its size and that its scale gives a plausible median."""
+        depth = images.read_depth(path, self.camera.depth_scale)
+        if shape is not None and depth.shape != shape:
+            raise InputError(path, f"depth is {depth.shape[1]}x{depth.shape[0]} but the colour "
+                                   f"image is {shape[1]}x{shape[0]}")
+        valid = depth[depth > 0]
+        if valid.size:
+            median = float(np.median(valid))
+            if not (self.io.min_median_depth <= median <= self.io.max_median_depth):
+                raise InputError(path, f"median depth is {median:.4g} m, outside "
+                                       f"[{self.io.min_median_depth:g}, "
+                                       f"{self.io.max_median_depth:g}] m: is depth_scale "
+                                       f"{self.camera.depth_scale:g} m/unit right?")
+        return depth
+
+    def load_frame(self, frame_id: str) -> Frame:
+        rgb = images.read_rgb(self.rgb_path(frame_id))
+        depth = self.read_depth_checked(self.depth_path(frame_id), rgb.shape[:2])
+        camera, notice = fit_camera_to_image(self.camera, rgb.shape[1], rgb.shape[0])
+        self._notice(notice)
+        return Frame(self, frame_id, rgb, depth, camera)
+
+    def load_gt_depth(self, frame_id: str, shape: tuple[int, int]) -> np.ndarray | None:
+        path = self.gt_depth_path(frame_id)
+        return None if path is None else self.read_depth_checked(path, shape)
+
+    def load_mask(self, path: Path | None, shape: tuple[int, int]) -> np.ndarray | None:
+        if path is None:
+            return None
+        mask = images.read_mask(path, split_binary=self.split_binary_masks)
+        if mask.shape != shape:
+            raise InputError(path, f"mask is {mask.shape[1]}x{mask.shape[0]} but the images are "
+                                   f"{shape[1]}x{shape[0]}")
+        return mask
+
+    def load_gt_objects(self, frame_id: str) -> dict | None:
+        path = self.gt_objects_path(frame_id)
+        if path is None:
+            return None
+        try:
+            return json.loads(path.read_text(encoding="utf-8"))
+        except (ValueError, OSError) as exc:
+            raise InputError(path, f"cannot read JSON ({exc})") from None
+
+    # ---- predictions (evaluate) -------------------------------------------------------------
+    def prediction_path(self, pred: str, frame_id: str) -> Path | None:
+        """Depth file of a prediction: ``depth`` is the raw sensor; other names are folders
+        looked up under the output root, then the input root; a path with a slash is used as is."""
+        if pred == "depth":
+            return self.depth_path(frame_id) if self.depth_path(frame_id).is_file() else None
+        folder = Path(pred)
+        candidates = [folder] if folder.is_absolute() or "/" in pred else \
+            [self.out / pred, self.root / pred]
+        for base in candidates:
+            hit = self._find(base, frame_id, images.DEPTH_SUFFIXES)
+            if hit is not None:
+                return hit
+        return None
