@@ -101,3 +101,54 @@ def error_map_image(pred_m: np.ndarray, gt_m: np.ndarray, mask: np.ndarray, *,
     image[base] = colour[base]
     image[hole] = (255, 0, 255)
     return image
+
+
+# ------------------------------------------------------------------------------------------------
+# per-frame evaluation of a scene (reads files through a SceneSource)
+
+def evaluation_mask(source, frame_id: str, shape: tuple[int, int], which: str
+                    ) -> tuple[np.ndarray, str]:
+    """Object mask to evaluate over and where it came from.
+
+    ``which``: ``gt`` (gt/masks or the adapter's mask), ``pred`` (masks/ written by segment), or
+    ``auto`` (gt, else pred).
+    """
+    from sr3d_cli.errors import InputError
+
+    if which in ("auto", "gt"):
+        path = source.gt_mask_path(frame_id)
+        if path is not None:
+            return source.load_mask(path, shape), str(path)
+    if which in ("auto", "pred"):
+        path = source.prediction_path("masks", frame_id)
+        if path is not None and path.suffix == ".png":
+            return source.load_mask(path, shape), str(path)
+    raise InputError(source.frame_key(frame_id),
+                     f"no object mask to evaluate over (mask source: {which}; looked for "
+                     "gt/masks/ and masks/)")
+
+
+def evaluate_frame(source, frame_id: str, preds: list[str], *, holes: str = "full",
+                   mask_source: str = "auto") -> dict:
+    """Metrics of each prediction folder for one frame.
+
+    Returns ``{"mask": path, "pixels_in_mask": n, "preds": {pred: metrics}, "arrays": {...}}``;
+    ``arrays`` holds gt, mask and predictions for plotting.
+    """
+    from sr3d_cli.errors import InputError
+
+    gt_path = source.gt_depth_path(frame_id)
+    if gt_path is None:
+        raise InputError(source.frame_key(frame_id), "no ground-truth depth (gt/depth/)")
+    gt = source.read_depth_checked(gt_path)
+    mask, mask_from = evaluation_mask(source, frame_id, gt.shape, mask_source)
+    result = {"mask": mask_from, "preds": {}, "arrays": {"gt": gt, "mask": mask}}
+    for pred in preds:
+        path = source.prediction_path(pred, frame_id)
+        if path is None:
+            raise InputError(source.frame_key(frame_id),
+                             f"no prediction '{pred}' (looked in {source.out / pred})")
+        depth = source.read_depth_checked(path, gt.shape)
+        result["preds"][pred] = depth_metrics(depth, gt, mask > 0, holes=holes)
+        result["arrays"][pred] = depth
+    return result

@@ -171,14 +171,16 @@ class SceneSource:
 
     # ---- predictions (evaluate) -------------------------------------------------------------
     def prediction_path(self, pred: str, frame_id: str) -> Path | None:
-        """Depth file of a prediction: ``depth`` is the raw sensor; other names are folders
-        looked up under the output root, then the input root; a path with a slash is used as is."""
+        """Depth file of a prediction. ``depth`` is the raw sensor; any other name is a folder
+        looked up under the output root, then the input root, then as given (absolute or
+        relative to the working directory)."""
         if pred == "depth":
-            return self.depth_path(frame_id) if self.depth_path(frame_id).is_file() else None
+            path = self.depth_path(frame_id)
+            return path if path.is_file() else None
         folder = Path(pred)
-        candidates = [folder] if folder.is_absolute() or "/" in pred else \
-            [self.out / pred, self.root / pred]
-        for base in candidates:
+        bases = [folder] if folder.is_absolute() else [self.out / folder, self.root / folder,
+                                                       folder]
+        for base in bases:
             hit = self._find(base, frame_id, images.DEPTH_SUFFIXES)
             if hit is not None:
                 return hit

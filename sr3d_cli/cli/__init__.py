@@ -1,0 +1,27 @@
+"""The ``sr3d`` command: a click group with one small module per subcommand."""
+
+from __future__ import annotations
+
+import click
+
+from sr3d_cli import __version__
+from sr3d_cli.cli.evaluate import evaluate
+from sr3d_cli.cli.synth import synth
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="sr3d")
+def cli():
+    """Repair the depth of transparent and specular objects from one RGB-D frame.
+
+    Every command reads and writes scene folders (see README: "Scene folder").
+    Exit codes: 0 all done, 1 some frames failed, 2 usage or configuration error.
+    """
+
+
+cli.add_command(synth)
+cli.add_command(evaluate)
+
+
+def main() -> None:
+    cli(prog_name="sr3d")

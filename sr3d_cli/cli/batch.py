@@ -1,0 +1,52 @@
+"""Walking the frames of one or more scene folders with per-frame failure isolation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterator
+
+from sr3d_cli.cli.options import UsageExit
+from sr3d_cli.cli.report import Report
+from sr3d_cli.config import Config
+from sr3d_cli.errors import ConfigError, InputError
+from sr3d_cli.io.formats import discover_scenes
+from sr3d_cli.io.frames import select_frames
+from sr3d_cli.io.scene import SceneSource
+
+
+def open_scenes(path: str | Path, cfg: Config, out: str | Path | None) -> list[SceneSource]:
+    try:
+        return discover_scenes(path, cfg.io, out)
+    except InputError as exc:
+        raise UsageExit(str(exc)) from None
+
+
+def iter_frames(scenes: list[SceneSource], spec: str | None, report: Report
+                ) -> Iterator[tuple[SceneSource, str]]:
+    """(scene, frame id) pairs selected by ``spec``; a scene whose camera or folder is broken is
+    reported once (all its frames counted as failed) and the others go on."""
+    plan: list[tuple[SceneSource, list[str]]] = []
+    for scene in scenes:
+        try:
+            ids = scene.frame_ids()
+        except OSError as exc:
+            report.fail(str(scene.root), InputError(scene.root, f"cannot list frames ({exc})"))
+            continue
+        try:
+            ids = select_frames(ids, spec)
+        except ConfigError as exc:
+            if len(scenes) == 1:
+                raise UsageExit(str(exc)) from None
+            ids = []
+        if ids:
+            plan.append((scene, ids))
+    if spec and not plan:
+        raise UsageExit(f"--frames {spec!r} matches no frame")
+    for scene, ids in plan:
+        try:
+            scene.camera
+        except InputError as exc:
+            report.fail(str(scene.root), exc, count=len(ids))
+            continue
+        for frame_id in ids:
+            yield scene, frame_id

@@ -1,0 +1,136 @@
+"""``sr3d evaluate SCENE``: depth metrics against ground truth, several predictions side by side."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import click
+from tqdm import tqdm
+
+from sr3d_cli.cli.batch import iter_frames, open_scenes
+from sr3d_cli.cli.options import UsageExit, common_options, load_config, scene_options
+from sr3d_cli.cli.report import Report
+
+COLUMNS = ("frames", "pixels", "coverage", "rmse", "rel", "mae",
+           "delta_1.05", "delta_1.10", "delta_1.25")
+HEADERS = ("frames", "pixels", "valid%", "RMSE", "REL", "MAE", "d<1.05", "d<1.10", "d<1.25")
+
+
+def _fmt(key: str, value) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    if key in ("frames", "pixels"):
+        return str(int(value))
+    if key == "coverage":
+        return f"{100 * value:.1f}"
+    if key.startswith("delta"):
+        return f"{value:.2f}"
+    return f"{value:.4f}"
+
+
+def format_table(means: dict[str, dict]) -> str:
+    width = max([4] + [len(p) for p in means])
+    lines = [f"{'pred':<{width}}  " + "  ".join(f"{h:>8}" for h in HEADERS)]
+    for pred, row in means.items():
+        lines.append(f"{pred:<{width}}  " + "  ".join(f"{_fmt(k, row.get(k)):>8}"
+                                                    for k in COLUMNS))
+    return "\n".join(lines)
+
+
+def _nan_to_none(obj):
+    if isinstance(obj, float) and math.isnan(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _nan_to_none(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_nan_to_none(v) for v in obj]
+    return obj
+
+
+def _csv(frames: dict[str, dict], means: dict[str, dict]) -> str:
+    keys = ("pixels", "coverage", "rmse", "rel", "mae", "delta_1.05", "delta_1.10", "delta_1.25")
+    rows = ["frame,pred," + ",".join(keys)]
+    for key, per_pred in frames.items():
+        for pred, m in per_pred.items():
+            rows.append(f"{key},{pred}," + ",".join("" if math.isnan(float(m[k])) else f"{m[k]:.6g}"
+                                                   for k in keys))
+    for pred, m in means.items():
+        rows.append(f"mean,{pred}," + ",".join("" if math.isnan(float(m[k])) else f"{m[k]:.6g}"
+                                              for k in keys))
+    return "\n".join(rows) + "\n"
+
+
+@click.command()
+@click.argument("scene", type=click.Path(exists=True, file_okay=False))
+@click.option("--pred", "preds", multiple=True,
+              help="Prediction to score: repaired (default), depth (raw sensor), or a folder; "
+                   "repeat for a side-by-side table.")
+@click.option("--only-valid", is_flag=True, default=None,
+              help="Count only pixels where the prediction has a value (default: holes count "
+                   "with full error, as ClearGrasp).")
+@click.option("--mask", "mask_source", type=click.Choice(["auto", "gt", "pred"]), default=None,
+              help="Pixels to score: gt masks, masks/ from segment, or auto (gt, else masks/).")
+@click.option("--plot", is_flag=True, default=None, help="Write per-frame error maps (PNG).")
+@scene_options
+@common_options
+def evaluate(scene, preds, only_valid, mask_source, plot, out, frames, fmt):
+    """Score depth predictions against ground truth over the transparent objects.
+
+    Writes metrics.json and metrics.csv (to --out, else SCENE) and prints the mean table.
+    """
+    from sr3d_cli import evaluate as core
+    from sr3d_cli.io.atomic import write_json, write_png, write_text
+
+    cfg = load_config({
+        "evaluate.pred": list(preds) or None, "evaluate.mask": mask_source,
+        "evaluate.plot": plot, "evaluate.holes": "ignore" if only_valid else None,
+        "io.format": fmt,
+    })
+    ev = cfg.evaluate
+    ctx = click.get_current_context()
+    report = Report(verbose=ctx.meta["sr3d.verbose"])
+    out_root = Path(out) if out else Path(scene)
+    scenes = open_scenes(scene, cfg, out)
+    pairs = list(iter_frames(scenes, frames, report))
+    per_frame: dict[str, dict] = {}
+    for source, frame_id in tqdm(pairs, desc="evaluate", unit="frame",
+                                 disable=ctx.meta["sr3d.quiet"]):
+        key = source.frame_key(frame_id)
+        try:
+            result = core.evaluate_frame(source, frame_id, ev.pred, holes=ev.holes,
+                                         mask_source=ev.mask)
+            if ev.plot:
+                arrays = result["arrays"]
+                for pred in ev.pred:
+                    image = core.error_map_image(arrays[pred], arrays["gt"], arrays["mask"],
+                                                 max_error=ev.plot_max_error)
+                    write_png(source.out / "eval_plots" / Path(pred).name / f"{frame_id}.png",
+                              image)
+        except Exception as exc:
+            report.fail(key, exc)
+            continue
+        per_frame[key] = result["preds"]
+        report.ok()
+    means = {pred: core.mean_metrics([f[pred] for f in per_frame.values()]) for pred in ev.pred}
+    document = {
+        "holes": core.HOLES_NOTE[ev.holes],
+        "pixels": "inside the object mask (gt/masks, else masks/; ClearGrasp: the -mask.png "
+                  "components) where the ground truth is finite and > 0",
+        "mean": "per-frame metrics averaged over frames with counted pixels",
+        "units": {"rmse": "m", "mae": "m", "rel": "|pred - gt| / gt", "delta": "percent",
+                  "coverage": "share of counted pixels where the prediction is valid"},
+        "predictions": list(ev.pred),
+        "means": means,
+        "frames": per_frame,
+        "failed": report.failures,
+    }
+    try:
+        write_json(out_root / "metrics.json", _nan_to_none(document))
+        write_text(out_root / "metrics.csv", _csv(per_frame, means))
+    except OSError as exc:
+        raise UsageExit(f"{out_root}: cannot write metrics ({exc.strerror or exc}); "
+                        "use --out DIR") from None
+    click.echo(f"# {core.HOLES_NOTE[ev.holes]}")
+    click.echo(format_table(means))
+    report.finish("frames")

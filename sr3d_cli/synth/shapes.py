@@ -1,0 +1,138 @@
+"""Procedural glassware as surfaces of revolution.
+
+Object frame of every generated mesh (and of sr3d's meshes in general): origin at the centre of
+the base on the symmetry axis, +z along the axis towards the top (opening or neck), units such
+that the height is 1; the metric size is the pose's ``scale`` (= height in metres).
+
+A profile is a polyline of ``(r, z)`` points in metres that starts and ends on the axis
+(``r == 0``); revolving it gives a closed, watertight surface. Open vessels (drinking glass,
+beaker, goblet) run up the outer wall, over the rim and down the inner wall, so they have real
+wall thickness and a visible inside.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+KINDS = ("bottle", "glass", "flask", "goblet", "beaker", "vial")
+
+
+@dataclass
+class Glassware:
+    kind: str
+    profile: np.ndarray  # (n, 2) r, z in metres, ends on the axis
+    height: float  # metres
+
+    def unit_mesh(self, sections: int = 48) -> trimesh.Trimesh:
+        """Watertight mesh in the object frame (height 1)."""
+        return revolve(self.profile / self.height, sections)
+
+    @property
+    def max_radius(self) -> float:
+        return float(self.profile[:, 0].max())
+
+
+def revolve(profile: np.ndarray, sections: int = 48) -> trimesh.Trimesh:
+    """Revolve a ``(n, 2)`` (r, z) polyline about the z axis; both ends must have r == 0.
+
+    Returns a watertight mesh with outward normals.
+    """
+    profile = np.asarray(profile, dtype=np.float64)
+    if profile.ndim != 2 or profile.shape[1] != 2 or len(profile) < 3:
+        raise ValueError("profile must be (n >= 3, 2)")
+    if profile[0, 0] != 0 or profile[-1, 0] != 0 or np.any(profile[1:-1, 0] <= 0):
+        raise ValueError("profile must start and end on the axis and stay off it in between")
+    ring = profile[1:-1]
+    m = len(ring)
+    theta = np.linspace(0.0, 2 * np.pi, sections, endpoint=False)
+    ring_v = np.stack([
+        (ring[:, 0:1] * np.cos(theta)).ravel(),
+        (ring[:, 0:1] * np.sin(theta)).ravel(),
+        np.repeat(ring[:, 1], sections),
+    ], axis=1)
+    bottom, top = len(ring_v), len(ring_v) + 1
+    vertices = np.vstack([ring_v, [[0, 0, profile[0, 1]]], [[0, 0, profile[-1, 1]]]])
+    j = np.arange(sections)
+    jn = (j + 1) % sections
+    faces = [np.stack([np.full(sections, bottom), jn, j], axis=1)]
+    for i in range(m - 1):
+        a, b = i * sections + j, i * sections + jn
+        c, d = (i + 1) * sections + j, (i + 1) * sections + jn
+        faces += [np.stack([a, b, d], axis=1), np.stack([a, d, c], axis=1)]
+    last = (m - 1) * sections
+    faces.append(np.stack([np.full(sections, top), last + j, last + jn], axis=1))
+    mesh = trimesh.Trimesh(vertices, np.vstack(faces), process=False)
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
+def _arc(r0, z0, r1, z1, n, bulge):
+    """Points from (r0, z0) to (r1, z1) (excluding the start) bowed outwards by ``bulge`` metres."""
+    t = np.linspace(0, 1, n + 1)[1:]
+    r = r0 + (r1 - r0) * t + bulge * np.sin(np.pi * t)
+    z = z0 + (z1 - z0) * t
+    return list(zip(r, z))
+
+
+def _open_vessel(outer: list, wall: float, base: float) -> np.ndarray:
+    """Close an outer wall ``[(0, 0), ..., (r_rim, h)]`` with a rim and an inner wall."""
+    outer = np.asarray(outer, dtype=np.float64)
+    inner = outer[1:].copy()[::-1]
+    inner[:, 0] = np.maximum(inner[:, 0] - wall, wall * 0.5)
+    inner[:, 1] = np.maximum(inner[:, 1], base)
+    keep = np.concatenate([[True], np.diff(inner[:, 1]) < -1e-6])  # strictly descending in z
+    inner = inner[keep]
+    return np.vstack([outer, inner, [[0.0, base]]])
+
+
+def make_glassware(kind: str, rng: np.random.Generator) -> Glassware:
+    """A random object of ``kind`` with plausible lab/kitchen proportions (metres)."""
+    u = rng.uniform
+    wall = u(0.0015, 0.003)
+    if kind == "bottle":
+        r, h = u(0.025, 0.045), u(0.16, 0.30)
+        hb, rn = h * u(0.5, 0.65), r * u(0.3, 0.45)
+        hs = h * u(0.12, 0.2)
+        prof = [(0, 0), (r * 0.92, 0), (r, 0.006), (r, hb)]
+        prof += _arc(r, hb, rn, hb + hs, 6, r * 0.15)
+        prof += [(rn, h - 0.004), (rn * 0.9, h), (0, h)]
+        return Glassware(kind, np.asarray(prof), h)
+    if kind == "vial":
+        r, h = u(0.008, 0.015), u(0.045, 0.09)
+        prof = [(0, 0), (r * 0.85, 0), (r, 0.003), (r, h * 0.85), (r * 0.8, h * 0.88),
+                (r * 0.8, h), (0, h)]
+        return Glassware(kind, np.asarray(prof), h)
+    if kind == "flask":  # Erlenmeyer
+        rb, h = u(0.035, 0.06), u(0.10, 0.18)
+        rn, hc = u(0.012, 0.02), h * u(0.6, 0.72)
+        prof = [(0, 0), (rb * 0.95, 0), (rb, 0.004)]
+        prof += _arc(rb, 0.004, rn, hc, 6, 0.0)
+        prof += [(rn, h - 0.003), (rn * 1.15, h), (0, h)]
+        return Glassware(kind, np.asarray(prof), h)
+    if kind == "glass":  # tumbler, slightly tapered
+        rb, h = u(0.025, 0.035), u(0.08, 0.14)
+        rt = rb * u(1.0, 1.3)
+        outer = [(0, 0), (rb * 0.95, 0), (rb, 0.004)] + _arc(rb, 0.004, rt, h, 4, 0.0)
+        return Glassware(kind, _open_vessel(outer, wall, u(0.006, 0.012)), h)
+    if kind == "beaker":
+        r, h = u(0.025, 0.05), u(0.06, 0.13)
+        outer = [(0, 0), (r * 0.96, 0), (r, 0.003), (r, h - 0.003), (r * 1.06, h)]
+        return Glassware(kind, _open_vessel(outer, wall, u(0.003, 0.005)), h)
+    if kind == "goblet":
+        rf, hs, h = u(0.028, 0.04), u(0.05, 0.09), u(0.14, 0.22)
+        rbowl, rrim = u(0.035, 0.048), None
+        rrim = rbowl * u(0.75, 0.95)
+        rs = u(0.004, 0.006)
+        outer = [(0, 0), (rf, 0), (rf * 0.95, 0.004), (rs, 0.01), (rs, hs)]
+        bowl_h = h - hs
+        t = np.linspace(0, 1, 10)[1:]
+        r_bowl = rs + (rbowl - rs) * np.sin(np.pi * 0.62 * t) / np.sin(np.pi * 0.62)
+        r_bowl = np.minimum(r_bowl, rbowl)
+        r_bowl[-3:] = np.linspace(r_bowl[-4], rrim, 4)[1:]
+        outer += list(zip(r_bowl, hs + bowl_h * t))
+        return Glassware(kind, _open_vessel(outer, wall, hs + 0.008), h)
+    raise ValueError(f"unknown glassware kind {kind!r}; choose from {', '.join(KINDS)}")
