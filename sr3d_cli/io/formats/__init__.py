@@ -60,7 +60,7 @@ def discover_scenes(path: str | Path, io: IOConfig, out: str | Path | None = Non
 
     walk(path, 0)
     if not found:
-        wanted = "a scene folder" if io.format == "auto" else f"a {io.format} scene"
+        wanted = "scene folder" if io.format == "auto" else f"{io.format} scene folder"
         raise InputError(path, f"no {wanted} found here or below (native: rgb/ and depth/ "
                                "folders; ClearGrasp: NNN-transparent-rgb-img.jpg files)")
     scenes = []

@@ -1,0 +1,65 @@
+from pathlib import Path
+
+import pytest
+import yaml
+
+from sr3d_cli.config import Config, build_config, to_dict
+from sr3d_cli.errors import ConfigError
+
+DEFAULT_YAML = Path(__file__).resolve().parents[1] / "configs" / "default.yaml"
+
+
+def test_default_yaml_lists_every_key_with_the_builtin_defaults():
+    assert yaml.safe_load(DEFAULT_YAML.read_text()) == to_dict(Config())
+
+
+def test_every_key_in_default_yaml_has_a_comment():
+    for line in DEFAULT_YAML.read_text().splitlines():
+        if line.startswith("  ") and ":" in line:
+            assert "#" in line, f"no comment on: {line}"
+
+
+def test_precedence_defaults_file_set_flags(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("synth:\n  scenes: 7\n  seed: 3\n  views: 2\n")
+    cfg = build_config(path, ["synth.seed=11", "synth.views=5"], {"synth.views": 9,
+                                                                 "synth.scenes": None})
+    assert cfg.synth.scenes == 7  # file beats default; a None flag is "not given"
+    assert cfg.synth.seed == 11  # --set beats file
+    assert cfg.synth.views == 9  # flag beats --set
+    assert cfg.synth.lying_fraction == Config().synth.lying_fraction  # untouched default
+
+
+def test_unknown_key_names_key_and_file(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("evaluate:\n  holez: full\n")
+    with pytest.raises(ConfigError, match=r"'evaluate.holez' in .*bad.yaml"):
+        build_config(path)
+
+
+def test_unknown_section_and_wrong_type(tmp_path):
+    with pytest.raises(ConfigError, match="unknown section 'evaluat'"):
+        build_config(None, ["evaluat.holes=full"])
+    with pytest.raises(ConfigError, match="'synth.scenes' in --set: expected an integer"):
+        build_config(None, ["synth.scenes=many"])
+    with pytest.raises(ConfigError, match="not one of full, ignore"):
+        build_config(None, ["evaluate.holes=some"])
+    with pytest.raises(ConfigError, match="expected section.key=value"):
+        build_config(None, ["scenes=3"])
+
+
+def test_numbers_and_lists_are_coerced():
+    cfg = build_config(None, ["io.depth_scale=1", "evaluate.pred=depth,repaired",
+                              "synth.distance=[0.4, 1]"])
+    assert cfg.io.depth_scale == 1.0 and isinstance(cfg.io.depth_scale, float)
+    assert cfg.evaluate.pred == ["depth", "repaired"]
+    assert cfg.synth.distance == [0.4, 1.0]
+
+
+def test_unreadable_and_invalid_yaml(tmp_path):
+    with pytest.raises(ConfigError, match="cannot read config file"):
+        build_config(tmp_path / "missing.yaml")
+    bad = tmp_path / "broken.yaml"
+    bad.write_text("io: [unclosed\n")
+    with pytest.raises(ConfigError, match="broken.yaml: config file is not valid YAML"):
+        build_config(bad)
