@@ -212,6 +212,44 @@ def import_pyrender():
     return pyrender
 
 
+def _fill_partial_normals(normals: np.ndarray, ids: np.ndarray, full: float = 0.9,
+                          passes: int = 3) -> np.ndarray:
+    """Unit normals from a multisampled normal image ``(H, W, 3)``.
+
+    At silhouettes a pixel's value blends the object with the background (a zero vector), so it
+    is short and its direction unreliable (it was measured to vary between identical runs).
+    Such pixels take the normal of their best-covered 8-neighbour with the same id.
+    """
+    length = np.linalg.norm(normals, axis=-1)
+    out = normals / np.maximum(length, 1e-6)[..., None]
+    h, w = ids.shape
+    for _ in range(passes):
+        short = (length < full) & (ids > 0)
+        if not short.any():
+            break
+        best_len = np.where(short, -1.0, length)
+        best = out.copy()
+        for dy in (-1, 0, 1):
+            for dx in (-1, 0, 1):
+                if dy == 0 and dx == 0:
+                    continue
+                ys = slice(max(dy, 0), h + min(dy, 0))
+                yd = slice(max(-dy, 0), h + min(-dy, 0))
+                xs = slice(max(dx, 0), w + min(dx, 0))
+                xd = slice(max(-dx, 0), w + min(-dx, 0))
+                cand_len = np.full((h, w), -1.0)
+                cand_len[yd, xd] = np.where(ids[ys, xs] == ids[yd, xd], length[ys, xs], -1.0)
+                cand = np.zeros_like(out)
+                cand[yd, xd] = out[ys, xs]
+                take = short & (cand_len > best_len)
+                best_len = np.where(take, cand_len, best_len)
+                best[take] = cand[take]
+        fixed = short & (best_len >= full)
+        out[fixed] = best[fixed]
+        length = np.where(fixed, 1.0, length)
+    return out
+
+
 class PyrenderRenderer(Renderer):
     """Offscreen OpenGL. One renderer per image size is kept; the GL context is made on init."""
 
@@ -266,7 +304,7 @@ class PyrenderRenderer(Renderer):
         ids = seg[..., 0].astype(np.int32) + 256 * seg[..., 1].astype(np.int32)
         depth = np.asarray(depth, dtype=np.float32)
         normals = colour[..., :3].astype(np.float32) / 255.0 * 2.0 - 1.0
-        normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-6)
+        normals = _fill_partial_normals(normals, ids)
         empty = depth <= 0
         normals[empty] = 0
         ids[empty] = 0
