@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 
+from sr3d_cli.errors import InputError
+
 METRICS = ("rmse", "rel", "mae", "delta_1.05", "delta_1.10", "delta_1.25")
 DELTAS = {"delta_1.05": 1.05, "delta_1.10": 1.10, "delta_1.25": 1.25}
 HOLES_NOTE = {
@@ -113,8 +115,6 @@ def evaluation_mask(source, frame_id: str, shape: tuple[int, int], which: str
     ``which``: ``gt`` (gt/masks or the adapter's mask), ``pred`` (masks/ written by segment), or
     ``auto`` (gt, else pred).
     """
-    from sr3d_cli.errors import InputError
-
     if which in ("auto", "gt"):
         path = source.gt_mask_path(frame_id)
         if path is not None:
@@ -135,8 +135,6 @@ def evaluate_frame(source, frame_id: str, preds: list[str], *, holes: str = "ful
     Returns ``{"mask": path, "pixels_in_mask": n, "preds": {pred: metrics}, "arrays": {...}}``;
     ``arrays`` holds gt, mask and predictions for plotting.
     """
-    from sr3d_cli.errors import InputError
-
     gt_path = source.gt_depth_path(frame_id)
     if gt_path is None:
         raise InputError(source.frame_key(frame_id), "no ground-truth depth (gt/depth/)")

@@ -100,8 +100,7 @@ class NumpyRenderer(Renderer):
     def render(self, meshes, camera):
         h, w = camera.height, camera.width
         K = camera.K
-        all_pix, all_z, all_n = [], [], []
-        all_id = []
+        all_pix, all_z, all_n, all_id = [], [], [], []
         for mesh in meshes:
             V = np.asarray(mesh.vertices, dtype=np.float64)
             F = np.asarray(mesh.faces, dtype=np.int64)
@@ -117,15 +116,12 @@ class NumpyRenderer(Renderer):
             else:
                 tri_n = N[F]
             data = np.concatenate([tri, tri_n], axis=2)  # (m, 3, 6)
-            zmin = data[:, :, 2].min(axis=1)
-            zmax = data[:, :, 2].max(axis=1)
-            data = data[zmax > ZNEAR]
+            data = data[data[:, :, 2].max(axis=1) > ZNEAR]
             straddle = data[:, :, 2].min(axis=1) < ZNEAR
             clipped = [t for d in data[straddle] for t in _clip_near(d, ZNEAR)]
             data = data[~straddle]
             if clipped:
                 data = np.concatenate([data, np.stack(clipped)])
-            del zmin, zmax
             pix, z, n = self._rasterise(data, K, h, w)
             all_pix.append(pix)
             all_z.append(z)

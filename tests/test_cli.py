@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from sr3d_cli.cli import cli
-from sr3d_cli.io.atomic import write_json, write_png
+from sr3d_cli.io.atomic import write_json
 from sr3d_cli.io.images import write_depth
 from tests.conftest import make_native_scene
 

@@ -2,7 +2,6 @@
 like glass. Seeds here (100+) are not the ones the benchmark uses."""
 
 import hashlib
-from pathlib import Path
 
 import numpy as np
 import pytest

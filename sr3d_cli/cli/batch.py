@@ -44,7 +44,7 @@ def iter_frames(scenes: list[SceneSource], spec: str | None, report: Report
         raise UsageExit(f"--frames {spec!r} matches no frame")
     for scene, ids in plan:
         try:
-            scene.camera
+            _ = scene.camera  # read once, so a broken camera file fails the scene, not each frame
         except InputError as exc:
             report.fail(str(scene.root), exc, count=len(ids))
             continue

@@ -50,14 +50,14 @@ def _nan_to_none(obj):
 
 def _csv(frames: dict[str, dict], means: dict[str, dict]) -> str:
     keys = ("pixels", "coverage", "rmse", "rel", "mae", "delta_1.05", "delta_1.10", "delta_1.25")
+
+    def row(name: str, pred: str, m: dict) -> str:
+        cells = ("" if math.isnan(float(m[k])) else f"{m[k]:.6g}" for k in keys)
+        return f"{name},{pred}," + ",".join(cells)
+
     rows = ["frame,pred," + ",".join(keys)]
-    for key, per_pred in frames.items():
-        for pred, m in per_pred.items():
-            rows.append(f"{key},{pred}," + ",".join("" if math.isnan(float(m[k])) else f"{m[k]:.6g}"
-                                                   for k in keys))
-    for pred, m in means.items():
-        rows.append(f"mean,{pred}," + ",".join("" if math.isnan(float(m[k])) else f"{m[k]:.6g}"
-                                              for k in keys))
+    rows += [row(key, pred, m) for key, per_pred in frames.items() for pred, m in per_pred.items()]
+    rows += [row("mean", pred, m) for pred, m in means.items()]
     return "\n".join(rows) + "\n"
 
 

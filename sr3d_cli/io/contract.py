@@ -35,7 +35,7 @@ def check_frame(source: SceneSource, frame_id: str, renderer: Renderer | None = 
     except Sr3dError as exc:
         return [str(exc)], ious
     shape = frame.rgb.shape[:2]
-    raw = np.asarray(images._decode(source.depth_path(frame_id), -1))
+    raw = images.decode_image(source.depth_path(frame_id))
     if raw.dtype != np.uint16:
         problems.append(f"{key}: depth PNG is {raw.dtype}, expected uint16")
     try:

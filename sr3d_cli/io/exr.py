@@ -5,11 +5,14 @@ opencv-python-headless is built without OpenEXR, so this uses the ``OpenEXR`` pa
 
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from sr3d_cli.errors import InputError, MissingExtraError
+from sr3d_cli.io.atomic import write_bytes
 
 
 def _openexr():
@@ -40,12 +43,9 @@ def read_exr(path: str | Path) -> np.ndarray:
 
 
 def write_exr(path: str | Path, depth_m: np.ndarray) -> None:
-    """Write a float32 single-channel EXR (used by tests to build fixtures)."""
+    """Write a float32 single-channel EXR atomically (OpenEXR writes to a named file, so it
+    goes to a private temporary file first)."""
     OpenEXR = _openexr()
-    from sr3d_cli.io.atomic import write_bytes
-    import os
-    import tempfile
-
     data = np.ascontiguousarray(depth_m, dtype=np.float32)
     fd, tmp = tempfile.mkstemp(suffix=".exr")
     os.close(fd)

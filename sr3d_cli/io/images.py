@@ -19,7 +19,8 @@ DEPTH_SUFFIXES = (".png", ".npy", ".exr", ".tif", ".tiff")
 RGB_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
-def _decode(path: Path, flags: int) -> np.ndarray:
+def decode_image(path: Path, flags: int = cv2.IMREAD_UNCHANGED) -> np.ndarray:
+    """Decode an image file as stored (dtype and channels kept); errors name the file."""
     try:
         data = np.fromfile(path, dtype=np.uint8)
     except FileNotFoundError:
@@ -37,7 +38,7 @@ def _decode(path: Path, flags: int) -> np.ndarray:
 def read_rgb(path: str | Path) -> np.ndarray:
     """Colour image as ``(H, W, 3) uint8`` RGB. Grey is expanded, alpha dropped, 16-bit scaled."""
     path = Path(path)
-    image = _decode(path, cv2.IMREAD_UNCHANGED)
+    image = decode_image(path, cv2.IMREAD_UNCHANGED)
     if image.dtype == np.uint16:
         image = (image.astype(np.float32) / 257.0 + 0.5).astype(np.uint8)
     elif image.dtype != np.uint8:
@@ -80,7 +81,7 @@ def read_depth(path: str | Path, depth_scale: float) -> np.ndarray:
         except (ValueError, OSError, EOFError) as exc:
             raise InputError(path, f"cannot read .npy ({exc})") from None
     else:
-        raw = _decode(path, cv2.IMREAD_UNCHANGED)
+        raw = decode_image(path, cv2.IMREAD_UNCHANGED)
     raw = np.asarray(raw)
     if raw.ndim == 3 and raw.shape[2] >= 1 and np.all(raw == raw[..., :1]):
         raw = raw[..., 0]
@@ -123,7 +124,7 @@ def read_mask(path: str | Path, *, split_binary: bool = False) -> np.ndarray:
     value is split into connected components numbered 1..n (ordered by top-left pixel).
     """
     path = Path(path)
-    mask = _decode(path, cv2.IMREAD_UNCHANGED)
+    mask = decode_image(path, cv2.IMREAD_UNCHANGED)
     if mask.ndim == 3:
         if not np.all(mask == mask[..., :1]):
             raise InputError(path, "mask has differing colour channels; expected instance ids")

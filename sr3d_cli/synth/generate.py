@@ -83,7 +83,7 @@ def render_frame(scene: layout.Layout, T_world_cam: np.ndarray, renderer: Render
     T_cam_world = np.linalg.inv(T_world_cam)
     glass_ids, colours = [], {}
     world = [_table_mesh()]
-    for i, obj in enumerate(scene.objects):
+    for obj in scene.objects:
         obj_id = (len(glass_ids) + 1) if obj.transparent else 1001 + len(colours)
         if obj.transparent:
             glass_ids.append(obj_id)
