@@ -45,7 +45,7 @@ class SynthConfig:
     elevation_deg: list[float] = field(default_factory=lambda: [25.0, 75.0])
     lying_fraction: float = 0.3
     depth_scale: float = 0.001
-    hole_fraction: list[float] = field(default_factory=lambda: [0.1, 0.8])
+    hole_fraction: list[float] = field(default_factory=lambda: [0.05, 0.6])
     see_through_fraction: list[float] = field(default_factory=lambda: [0.1, 0.7])
     noise_opaque: float = 0.0015
     noise_glass: float = 0.004
