@@ -120,8 +120,8 @@ def evaluation_mask(source, frame_id: str, shape: tuple[int, int], which: str
         if path is not None:
             return source.load_mask(path, shape), str(path)
     if which in ("auto", "pred"):
-        path = source.prediction_path("masks", frame_id)
-        if path is not None and path.suffix == ".png":
+        path = source.stage_file("masks", frame_id, (".png",))
+        if path is not None:
             return source.load_mask(path, shape), str(path)
     raise InputError(source.frame_key(frame_id),
                      f"no object mask to evaluate over (mask source: {which}; looked for "
@@ -132,8 +132,8 @@ def evaluate_frame(source, frame_id: str, preds: list[str], *, holes: str = "ful
                    mask_source: str = "auto") -> dict:
     """Metrics of each prediction folder for one frame.
 
-    Returns ``{"mask": path, "pixels_in_mask": n, "preds": {pred: metrics}, "arrays": {...}}``;
-    ``arrays`` holds gt, mask and predictions for plotting.
+    Returns ``{"mask": path, "preds": {pred: metrics}, "arrays": {...}}``; ``arrays`` holds
+    gt, mask and the predictions (metres) for plotting.
     """
     gt_path = source.gt_depth_path(frame_id)
     if gt_path is None:

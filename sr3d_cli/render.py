@@ -292,8 +292,9 @@ class PyrenderRenderer(Renderer):
         r = self._get(w, h)
         flags = pr.RenderFlags
         # The colour pass is multisampled, so its depth is resolved from sub-pixel samples;
-        # the SEG pass is not: depth and ids come from it, normals from the colour pass (whose
-        # background colour 0.5 decodes to a zero normal, so edge blending keeps directions).
+        # the SEG pass is not: depth and ids come from it. Normals come from the colour pass;
+        # its background 0.5 decodes to a zero normal, so partly covered silhouette pixels come
+        # out short, and _fill_partial_normals replaces them.
         colour, _ = r.render(scene, flags=flags.FLAT | flags.SKIP_CULL_FACES)
         seg, depth = r.render(scene, flags=flags.SEG | flags.SKIP_CULL_FACES,
                               seg_node_map=seg_map)

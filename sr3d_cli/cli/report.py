@@ -32,11 +32,9 @@ class Report:
         """Record a failure of ``item`` (``count`` frames) with one line on stderr."""
         self.failed += count
         if isinstance(exc, Sr3dError):
-            message = str(exc)
+            message = str(exc) if item in str(exc) else f"{item}: {exc}"
         else:
             message = f"{item}: unexpected {type(exc).__name__}: {exc}"
-        if isinstance(exc, Sr3dError) and item not in message:
-            message = f"{item}: {message}"
         self.failures.append(message)
         click.echo(f"error: {message}", err=True)
         if self.verbose:

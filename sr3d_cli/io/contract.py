@@ -1,13 +1,11 @@
 """Check a native scene folder against the data contract (DESIGN.md, "Scene folder").
 
-:func:`check_scene` returns a list of problems (empty = conforms) rather than raising, so one
+:func:`check_frame` returns a list of problems (empty = conforms) rather than raising, so one
 run reports everything. Ground-truth poses are checked by rendering each ground-truth mesh at
 its ``T_cam_obj`` and ``scale`` and comparing with the ground-truth mask.
 """
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -82,10 +80,3 @@ def check_frame(source: SceneSource, frame_id: str, renderer: Renderer | None = 
                                 f"{ious[m.id]:.3f} < {min_iou}")
     return problems, ious
 
-
-def check_scene(folder: str | Path, renderer: Renderer | None = None) -> list[str]:
-    source = SceneSource(Path(folder))
-    problems = []
-    for frame_id in source.frame_ids():
-        problems += check_frame(source, frame_id, renderer)[0]
-    return problems

@@ -170,18 +170,25 @@ class SceneSource:
             raise InputError(path, f"cannot read JSON ({exc})") from None
 
     # ---- predictions (evaluate) -------------------------------------------------------------
+    def stage_file(self, stage: str, frame_id: str, suffixes) -> Path | None:
+        """A stage output of a frame (e.g. ``masks``, ``repaired``): under the output root first,
+        then under the input root."""
+        for base in (self.out, self.root):
+            hit = self._find(base / stage, frame_id, suffixes)
+            if hit is not None:
+                return hit
+        return None
+
     def prediction_path(self, pred: str, frame_id: str) -> Path | None:
         """Depth file of a prediction. ``depth`` is the raw sensor; any other name is a folder
-        looked up under the output root, then the input root, then as given (absolute or
+        looked up as a stage output (output root, then input root), then as given (absolute or
         relative to the working directory)."""
         if pred == "depth":
             path = self.depth_path(frame_id)
             return path if path.is_file() else None
         folder = Path(pred)
-        bases = [folder] if folder.is_absolute() else [self.out / folder, self.root / folder,
-                                                       folder]
-        for base in bases:
-            hit = self._find(base, frame_id, images.DEPTH_SUFFIXES)
+        if not folder.is_absolute():
+            hit = self.stage_file(pred, frame_id, images.DEPTH_SUFFIXES)
             if hit is not None:
                 return hit
-        return None
+        return self._find(folder, frame_id, images.DEPTH_SUFFIXES)

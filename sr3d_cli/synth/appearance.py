@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 
 from sr3d_cli.geometry.camera import depth_to_points
+from sr3d_cli.geometry.transforms import apply_T
 
 
 def smooth_noise(rng: np.random.Generator, shape: tuple[int, int], cell: float) -> np.ndarray:
@@ -50,12 +51,22 @@ class TableTexture:
         return cv2.remap(self.image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
 
 
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+
+
+def _view_and_half(pts_cam: np.ndarray, light_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit directions ``(H, W, 3)`` towards the camera and halfway to the light (Blinn)."""
+    view = _unit(-pts_cam)
+    return view, _unit(view + light_cam)
+
+
 def shade_background(render, T_world_cam, K, texture: TableTexture, colours: dict[int, tuple],
                      table_id: int, light_cam: np.ndarray, shadow: np.ndarray) -> np.ndarray:
     """Colour image ``(H, W, 3) float32`` in [0, 1] of the table and opaque objects."""
     h, w = render.depth.shape
     pts_cam = depth_to_points(render.depth, K)
-    pts_world = pts_cam @ T_world_cam[:3, :3].T + T_world_cam[:3, 3]
+    pts_world = apply_T(T_world_cam, pts_cam)
     lambert = np.clip(render.normals @ light_cam, 0, 1)
     ambient = 0.45
     image = np.empty((h, w, 3), np.float32)
@@ -65,9 +76,7 @@ def shade_background(render, T_world_cam, K, texture: TableTexture, colours: dic
     tex = texture.lookup(pts_world[..., :2])
     light = (ambient + 0.6 * lambert)[..., None] * shadow[..., None]
     image[table] = (tex * light)[table]
-    view = -pts_cam / np.maximum(np.linalg.norm(pts_cam, axis=-1, keepdims=True), 1e-9)
-    half = view + light_cam
-    half /= np.maximum(np.linalg.norm(half, axis=-1, keepdims=True), 1e-9)
+    _, half = _view_and_half(pts_cam, light_cam)
     spec = np.clip((render.normals * half).sum(-1), 0, 1) ** 40
     for obj_id, colour in colours.items():
         sel = render.ids == obj_id
@@ -80,12 +89,9 @@ def shade_glass(background: np.ndarray, render, glass_ids: list[int], K: np.ndar
     """Composite glass objects over ``background (H, W, 3)``, using the full render's normals."""
     h, w = render.depth.shape
     out = background.copy()
-    pts = depth_to_points(render.depth, K)
-    view = -pts / np.maximum(np.linalg.norm(pts, axis=-1, keepdims=True), 1e-9)
+    view, half = _view_and_half(depth_to_points(render.depth, K), light_cam)
     n = render.normals
     cos = np.abs((n * view).sum(-1))
-    half = view + light_cam
-    half /= np.maximum(np.linalg.norm(half, axis=-1, keepdims=True), 1e-9)
     v, u = np.mgrid[0:h, 0:w].astype(np.float32)
     for obj_id in glass_ids:
         sel = render.ids == obj_id
@@ -114,7 +120,7 @@ def shade_glass(background: np.ndarray, render, glass_ids: list[int], K: np.ndar
 def contact_shadow(render_bg, T_world_cam, K, objects, table_id: int) -> np.ndarray:
     """Soft darkening of the table around each object's footprint, ``(H, W) float32`` factor."""
     pts_cam = depth_to_points(render_bg.depth, K)
-    xy = (pts_cam @ T_world_cam[:3, :3].T + T_world_cam[:3, 3])[..., :2]
+    xy = apply_T(T_world_cam, pts_cam)[..., :2]
     factor = np.ones(render_bg.depth.shape, np.float32)
     for obj in objects:
         centre, radius = obj.footprint()

@@ -8,9 +8,9 @@ import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull
 
-from sr3d_cli.geometry.camera import Camera
+from sr3d_cli.geometry.camera import Camera, project
 from sr3d_cli.geometry.transforms import apply_T, look_at, make_T, rotation_about
-from sr3d_cli.synth.shapes import KINDS, Glassware, make_glassware
+from sr3d_cli.synth.shapes import KINDS, make_glassware
 
 
 @dataclass
@@ -24,7 +24,6 @@ class Placed:
     transparent: bool
     pose: str = "standing"
     colour: tuple = (0.5, 0.5, 0.5)
-    glass: Glassware | None = None
 
     def world_vertices(self) -> np.ndarray:
         return apply_T(self.T_world_obj, self.scale * self.mesh.vertices)
@@ -77,10 +76,10 @@ def lying_rotation(profile: np.ndarray) -> np.ndarray:
     return rotation_between(outward_obj, np.array([0.0, 0.0, -1.0]))
 
 
-def _rest(mesh: trimesh.Trimesh, R: np.ndarray, scale: float, xy: np.ndarray) -> np.ndarray:
-    """Pose with rotation ``R`` placing the lowest point on the table at horizontal ``xy``."""
+def _rest(mesh: trimesh.Trimesh, R: np.ndarray, scale: float) -> np.ndarray:
+    """Pose with rotation ``R`` whose lowest point touches the table (``arrange`` moves it)."""
     z = (scale * mesh.vertices @ R.T)[:, 2]
-    return make_T(R, [xy[0], xy[1], -z.min()])
+    return make_T(R, [0.0, 0.0, -z.min()])
 
 
 def sample_glass(rng: np.random.Generator, lying_fraction: float) -> Placed:
@@ -90,9 +89,8 @@ def sample_glass(rng: np.random.Generator, lying_fraction: float) -> Placed:
     yaw = rotation_about([0, 0, 1], rng.uniform(0, 2 * np.pi))
     lying = kind != "flask" and rng.uniform() < lying_fraction
     R = yaw @ lying_rotation(glass.profile) if lying else yaw
-    T = _rest(mesh, R, glass.height, np.zeros(2))
-    return Placed(mesh, T, glass.height, kind, True, "lying" if lying else "standing",
-                  glass=glass)
+    T = _rest(mesh, R, glass.height)
+    return Placed(mesh, T, glass.height, kind, True, "lying" if lying else "standing")
 
 
 def sample_distractor(rng: np.random.Generator) -> Placed:
@@ -106,7 +104,7 @@ def sample_distractor(rng: np.random.Generator) -> Placed:
         mesh = trimesh.creation.cylinder(radius=rng.uniform(0.02, 0.045),
                                          height=rng.uniform(0.05, 0.14), sections=40)
         label = "can"
-    return Placed(mesh, _rest(mesh, yaw, 1.0, np.zeros(2)), 1.0, label, False, colour=colour)
+    return Placed(mesh, _rest(mesh, yaw, 1.0), 1.0, label, False, colour=colour)
 
 
 def arrange(objects: list[Placed], rng: np.random.Generator, spread: float = 0.16,
@@ -153,7 +151,6 @@ def in_view(points_world: np.ndarray, T_world_cam: np.ndarray, camera: Camera,
     p = apply_T(T_cam_world, points_world)
     if np.any(p[:, 2] < 0.1):
         return False
-    u = p[:, 0] / p[:, 2] * camera.fx + camera.cx
-    v = p[:, 1] / p[:, 2] * camera.fy + camera.cy
+    u, v = project(p, camera.K).T
     return bool(u.min() >= margin and v.min() >= margin and u.max() <= camera.width - 1 - margin
                 and v.max() <= camera.height - 1 - margin)
