@@ -34,6 +34,47 @@ class RenderConfig:
 
 
 @dataclass
+class PlaneConfig:
+    threshold: float = 0.006
+    iterations: int = 300
+    min_share: float = 0.15
+
+
+@dataclass
+class SegmentConfig:
+    backend: str = "training-free"
+    prompt: str = ""
+    min_area: int = 150
+    close_radius: int = 6
+    rough_factor: float = 2.0
+    grabcut_iterations: int = 4
+    max_object_share: float = 0.25
+    import_dir: str = ""
+    sam_encoder: str = ""
+    sam_decoder: str = ""
+    boxes: str = ""
+
+
+@dataclass
+class ReconstructConfig:
+    backend: str = "revolution"
+    masks: str = "segment"
+    min_pixels: int = 100
+    allow_border: bool = False
+    levels: int = 40
+    iterations: int = 12
+    sections: int = 48
+    lying_margin: float = 0.03
+    onnx_model: str = ""
+    onnx_decoder: str = ""
+    onnx_threshold: float = 25.0
+    onnx_resolution: int = 64
+    onnx_radius: float = 0.87
+    foreground_ratio: float = 0.85
+    library: str = ""
+
+
+@dataclass
 class SynthConfig:
     scenes: int = 4
     views: int = 1
@@ -65,6 +106,9 @@ class EvaluateConfig:
 class Config:
     io: IOConfig = field(default_factory=IOConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
+    plane: PlaneConfig = field(default_factory=PlaneConfig)
+    segment: SegmentConfig = field(default_factory=SegmentConfig)
+    reconstruct: ReconstructConfig = field(default_factory=ReconstructConfig)
     synth: SynthConfig = field(default_factory=SynthConfig)
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
 
@@ -72,6 +116,9 @@ class Config:
 CHOICES: dict[str, tuple[str, ...]] = {
     "io.format": ("auto", "native", "cleargrasp"),
     "render.backend": ("auto", "pyrender", "numpy"),
+    "segment.backend": ("training-free", "sam-onnx", "import"),
+    "reconstruct.backend": ("revolution", "onnx", "library"),
+    "reconstruct.masks": ("segment", "gt"),
     "evaluate.holes": ("full", "ignore"),
     "evaluate.mask": ("auto", "gt", "pred"),
 }

@@ -150,3 +150,35 @@ def evaluate_frame(source, frame_id: str, preds: list[str], *, holes: str = "ful
         result["preds"][pred] = depth_metrics(depth, gt, mask > 0, holes=holes)
         result["arrays"][pred] = depth
     return result
+
+
+def instance_ious(pred_ids: np.ndarray, gt_ids: np.ndarray) -> dict[int, float]:
+    """Best IoU of each ground-truth instance against any predicted instance.
+
+    pred_ids, gt_ids : (H, W) int, 0 = background. Returns {gt id: IoU in [0, 1]}.
+    """
+    out = {}
+    preds = [p for p in np.unique(pred_ids) if p > 0]
+    for g in np.unique(gt_ids):
+        if g <= 0:
+            continue
+        gm = gt_ids == g
+        best = 0.0
+        for p in preds:
+            pm = pred_ids == p
+            inter = np.count_nonzero(gm & pm)
+            if inter:
+                best = max(best, inter / np.count_nonzero(gm | pm))
+        out[int(g)] = float(best)
+    return out
+
+
+def chamfer_distance(mesh_a, mesh_b, samples: int = 4000, seed: int = 0) -> float:
+    """Symmetric Chamfer distance: the mean of the two mean nearest-neighbour distances between
+    ``samples`` surface points of each mesh (units of the meshes)."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    pa, _ = trimesh.sample.sample_surface(mesh_a, samples, seed=seed)
+    pb, _ = trimesh.sample.sample_surface(mesh_b, samples, seed=seed + 1)
+    return 0.5 * float(cKDTree(pb).query(pa)[0].mean() + cKDTree(pa).query(pb)[0].mean())

@@ -6,6 +6,8 @@ import click
 
 from sr3d_cli import __version__
 from sr3d_cli.cli.evaluate import evaluate
+from sr3d_cli.cli.reconstruct import reconstruct
+from sr3d_cli.cli.segment import segment
 from sr3d_cli.cli.synth import synth
 
 
@@ -20,6 +22,8 @@ def cli():
 
 
 cli.add_command(synth)
+cli.add_command(segment)
+cli.add_command(reconstruct)
 cli.add_command(evaluate)
 
 

@@ -1,8 +1,7 @@
 """Procedural glassware as surfaces of revolution.
 
-Object frame of every generated mesh (and of sr3d's meshes in general): origin at the centre of
-the base on the symmetry axis, +z along the axis towards the top (opening or neck), units such
-that the height is 1; the metric size is the pose's ``scale`` (= height in metres).
+Meshes use sr3d's object frame (see :mod:`sr3d_cli.geometry.revolution`): origin at the centre
+of the base, +z up the symmetry axis, height 1; the pose's ``scale`` is the height in metres.
 
 A profile is a polyline of ``(r, z)`` points in metres that starts and ends on the axis
 (``r == 0``); revolving it gives a closed, watertight surface. Open vessels (drinking glass,
@@ -16,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+
+from sr3d_cli.geometry.revolution import revolve
 
 KINDS = ("bottle", "glass", "flask", "goblet", "beaker", "vial")
 
@@ -33,41 +34,6 @@ class Glassware:
     @property
     def max_radius(self) -> float:
         return float(self.profile[:, 0].max())
-
-
-def revolve(profile: np.ndarray, sections: int = 48) -> trimesh.Trimesh:
-    """Revolve a ``(n, 2)`` (r, z) polyline about the z axis; both ends must have r == 0.
-
-    Returns a watertight mesh with outward normals.
-    """
-    profile = np.asarray(profile, dtype=np.float64)
-    if profile.ndim != 2 or profile.shape[1] != 2 or len(profile) < 3:
-        raise ValueError("profile must be (n >= 3, 2)")
-    if profile[0, 0] != 0 or profile[-1, 0] != 0 or np.any(profile[1:-1, 0] <= 0):
-        raise ValueError("profile must start and end on the axis and stay off it in between")
-    ring = profile[1:-1]
-    m = len(ring)
-    theta = np.linspace(0.0, 2 * np.pi, sections, endpoint=False)
-    ring_v = np.stack([
-        (ring[:, 0:1] * np.cos(theta)).ravel(),
-        (ring[:, 0:1] * np.sin(theta)).ravel(),
-        np.repeat(ring[:, 1], sections),
-    ], axis=1)
-    bottom, top = len(ring_v), len(ring_v) + 1
-    vertices = np.vstack([ring_v, [[0, 0, profile[0, 1]]], [[0, 0, profile[-1, 1]]]])
-    j = np.arange(sections)
-    jn = (j + 1) % sections
-    faces = [np.stack([np.full(sections, bottom), jn, j], axis=1)]
-    for i in range(m - 1):
-        a, b = i * sections + j, i * sections + jn
-        c, d = (i + 1) * sections + j, (i + 1) * sections + jn
-        faces += [np.stack([a, b, d], axis=1), np.stack([a, d, c], axis=1)]
-    last = (m - 1) * sections
-    faces.append(np.stack([np.full(sections, top), last + j, last + jn], axis=1))
-    mesh = trimesh.Trimesh(vertices, np.vstack(faces), process=False)
-    if mesh.volume < 0:
-        mesh.invert()
-    return mesh
 
 
 def _arc(r0, z0, r1, z1, n, bulge):

@@ -1,0 +1,41 @@
+"""``sr3d reconstruct SCENE``: a mesh per segmented object."""
+
+from __future__ import annotations
+
+import click
+
+from sr3d_cli.cli.options import UsageExit, common_options, load_config, scene_options
+from sr3d_cli.cli.stage_loop import run_frames
+from sr3d_cli.errors import InputError
+
+
+@click.command()
+@click.argument("scene", type=click.Path(exists=True, file_okay=False))
+@click.option("--backend", type=click.Choice(["revolution", "onnx", "library"]), default=None,
+              help="Reconstruction backend (default: reconstruct.backend).")
+@click.option("--masks", "masks", type=click.Choice(["segment", "gt"]), default=None,
+              help="Use masks/ from segment (default) or the ground-truth masks.")
+@click.option("--library", type=click.Path(exists=True, file_okay=False), default=None,
+              help="Folder of meshes (implies --backend library).")
+@scene_options
+@common_options
+def reconstruct(scene, backend, masks, library, out, frames, fmt):
+    """Write meshes/<frame>/<k>.ply (object frame: base centre, +z up the axis, height 1)."""
+    from sr3d_cli.reconstruct import Reconstructor
+    from sr3d_cli.stages import reconstruct_frame
+
+    if library and backend is None:
+        backend = "library"
+    cfg = load_config({"reconstruct.backend": backend, "reconstruct.masks": masks,
+                       "reconstruct.library": library, "io.format": fmt})
+    try:
+        reconstructor = Reconstructor(cfg.reconstruct)
+    except InputError as exc:
+        raise UsageExit(str(exc)) from None
+
+    def work(frame):
+        written, messages = reconstruct_frame(frame, reconstructor, cfg.plane,
+                                              cfg.reconstruct.masks)
+        return messages
+
+    run_frames("reconstruct", scene, cfg, out, frames, work)

@@ -1,0 +1,43 @@
+"""``sr3d segment SCENE``: instance masks of the transparent objects."""
+
+from __future__ import annotations
+
+import click
+
+from sr3d_cli.cli.options import UsageExit, common_options, load_config, scene_options
+from sr3d_cli.cli.stage_loop import run_frames
+from sr3d_cli.errors import InputError
+
+
+@click.command()
+@click.argument("scene", type=click.Path(exists=True, file_okay=False))
+@click.option("--backend", type=click.Choice(["training-free", "sam-onnx", "import"]),
+              default=None, help="Segmentation backend (default: segment.backend).")
+@click.option("--prompt", default=None, help='Text label stored with every instance ("glass cup").')
+@click.option("--import-dir", "import_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder of masks made elsewhere (<frame>.png; implies --backend import).")
+@click.option("--boxes", type=click.Path(exists=True), default=None,
+              help="Boxes JSON (or folder) prompting SAM instead of the training-free boxes.")
+@scene_options
+@common_options
+def segment(scene, backend, prompt, import_dir, boxes, out, frames, fmt):
+    """Write masks/<frame>.png (instance ids) and masks/<frame>.json (label, score, bbox)."""
+    from sr3d_cli.segment import Segmenter
+    from sr3d_cli.stages import write_instances
+
+    if import_dir and backend is None:
+        backend = "import"
+    cfg = load_config({"segment.backend": backend, "segment.prompt": prompt,
+                       "segment.import_dir": import_dir, "segment.boxes": boxes,
+                       "io.format": fmt})
+    try:
+        segmenter = Segmenter(cfg.segment, cfg.plane)
+    except InputError as exc:
+        raise UsageExit(str(exc)) from None
+
+    def work(frame):
+        instances = segmenter(frame.frame_id, frame.rgb, frame.depth_m, frame.camera.K)
+        write_instances(frame.scene, frame.frame_id, instances, cfg.segment.backend)
+        return [] if instances.objects else ["no transparent object found"]
+
+    run_frames("segment", scene, cfg, out, frames, work)

@@ -1,0 +1,96 @@
+"""Surfaces of revolution: sr3d's object frame, meshes from profiles, exact silhouettes.
+
+Object frame of every mesh sr3d writes or reads (synthetic ground truth, reconstructions,
+library entries after normalisation): origin at the centre of the base on the symmetry axis,
++z along the axis towards the top (opening or neck), units such that the height is 1. The metric
+size is the pose's ``scale`` (= height in metres): ``p_cam = R @ (scale * p_obj) + t``.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import trimesh
+
+
+def revolve(profile: np.ndarray, sections: int = 48) -> trimesh.Trimesh:
+    """Revolve a ``(n, 2)`` (r, z) polyline about the z axis; both ends must have r == 0.
+
+    Returns a watertight mesh with outward normals.
+    """
+    profile = np.asarray(profile, dtype=np.float64)
+    if profile.ndim != 2 or profile.shape[1] != 2 or len(profile) < 3:
+        raise ValueError("profile must be (n >= 3, 2)")
+    if profile[0, 0] != 0 or profile[-1, 0] != 0 or np.any(profile[1:-1, 0] <= 0):
+        raise ValueError("profile must start and end on the axis and stay off it in between")
+    ring = profile[1:-1]
+    m = len(ring)
+    theta = np.linspace(0.0, 2 * np.pi, sections, endpoint=False)
+    ring_v = np.stack([
+        (ring[:, 0:1] * np.cos(theta)).ravel(),
+        (ring[:, 0:1] * np.sin(theta)).ravel(),
+        np.repeat(ring[:, 1], sections),
+    ], axis=1)
+    bottom, top = len(ring_v), len(ring_v) + 1
+    vertices = np.vstack([ring_v, [[0, 0, profile[0, 1]]], [[0, 0, profile[-1, 1]]]])
+    j = np.arange(sections)
+    jn = (j + 1) % sections
+    faces = [np.stack([np.full(sections, bottom), jn, j], axis=1)]
+    for i in range(m - 1):
+        a, b = i * sections + j, i * sections + jn
+        c, d = (i + 1) * sections + j, (i + 1) * sections + jn
+        faces += [np.stack([a, b, d], axis=1), np.stack([a, d, c], axis=1)]
+    last = (m - 1) * sections
+    faces.append(np.stack([np.full(sections, top), last + j, last + jn], axis=1))
+    mesh = trimesh.Trimesh(vertices, np.vstack(faces), process=False)
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
+def silhouette(centres: np.ndarray, axis: np.ndarray, radii: np.ndarray, K: np.ndarray,
+               shape: tuple[int, int], origin: tuple[int, int] = (0, 0), n_theta: int = 32
+               ) -> np.ndarray:
+    """Silhouette ``(h, w) bool`` of a piecewise-conical solid of revolution, exactly.
+
+    centres : (L, 3) points on the axis (camera frame, metres), bottom to top; axis : (3,) unit
+    direction; radii : (L,) metres. Each frustum between consecutive circles is convex, so its
+    image is the convex hull of its two projected end circles. ``origin`` (x0, y0) is the
+    top-left pixel of the window ``shape`` being drawn. Points behind the camera are skipped.
+    """
+    axis = np.asarray(axis, dtype=np.float64)
+    helper = np.array([1.0, 0, 0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
+    u = np.cross(axis, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    theta = np.linspace(0, 2 * np.pi, n_theta, endpoint=False)
+    ring = np.cos(theta)[:, None] * u + np.sin(theta)[:, None] * v  # (T, 3)
+    pts = centres[:, None, :] + radii[:, None, None] * ring[None]  # (L, T, 3)
+    z = pts[..., 2]
+    uv = np.stack([pts[..., 0] / np.maximum(z, 1e-6) * K[0, 0] + K[0, 2] - origin[0],
+                   pts[..., 1] / np.maximum(z, 1e-6) * K[1, 1] + K[1, 2] - origin[1]], -1)
+    out = np.zeros(shape, np.uint8)
+    scale = 4  # sub-pixel precision for cv2 (fixed point, 2 bits)
+    for k in range(len(centres) - 1):
+        if (z[k] <= 0.01).any() or (z[k + 1] <= 0.01).any():
+            continue
+        hull = cv2.convexHull(np.rint(np.vstack([uv[k], uv[k + 1]]) * scale).astype(np.int32))
+        cv2.fillConvexPoly(out, hull, 1, lineType=cv2.LINE_8, shift=2)
+    return out > 0
+
+
+def profile_from_mesh(mesh: trimesh.Trimesh, bins: int = 64) -> np.ndarray:
+    """Outer envelope ``(n, 2)`` (r, z) of a mesh about its z axis: the largest radius of the
+    surface at each height (what a silhouette can show; the inside of a vessel is dropped)."""
+    samples, _ = trimesh.sample.sample_surface_even(mesh, 20000, seed=0)
+    pts = np.vstack([mesh.vertices, samples])
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    z = pts[:, 2]
+    z0, z1 = z.min(), z.max()
+    idx = np.clip(((z - z0) / max(z1 - z0, 1e-12) * bins).astype(int), 0, bins - 1)
+    r_max = np.zeros(bins)
+    np.maximum.at(r_max, idx, r)
+    zc = z0 + (np.arange(bins) + 0.5) / bins * (z1 - z0)
+    keep = r_max > 0
+    prof = np.column_stack([np.maximum(r_max[keep], 1e-4), zc[keep]])
+    return np.vstack([[0.0, z0], [prof[0, 0], z0], prof, [prof[-1, 0], z1], [0.0, z1]])

@@ -1,0 +1,277 @@
+"""Training-free reconstruction: a surface of revolution fitted to one instance mask.
+
+Most glassware is rotationally symmetric. Given the mask, the camera and the support plane, the
+object is modelled as a solid of revolution standing on the plane (axis = plane normal) or lying
+on it (axis parallel to the plane, resting on its widest part). The fit runs in 3D, so the
+camera's tilt and perspective are handled exactly: the silhouette of the current model is drawn
+with :func:`sr3d_cli.geometry.revolution.silhouette` and compared with the mask row by row in an
+image frame whose vertical is the projected axis; radii, the two ends and the lateral position
+are updated from the differences (a damped fixed-point iteration). Both hypotheses are fitted;
+the one whose silhouette matches the mask better wins (standing on ties).
+
+The result is a profile in sr3d's object frame (base centre, +z up the axis, height 1) and the
+fitted metric pose, kept as a hint for ``align``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from sr3d_cli.geometry.camera import project
+from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.revolution import silhouette
+from sr3d_cli.geometry.transforms import make_T, rotation_about
+
+
+@dataclass
+class RevolutionFit:
+    """profile : (n, 2) (r, z) object frame, height 1, ends on the axis.
+    base : (3,) base centre (camera frame, m); axis : (3,) unit; height : metres;
+    resting : 'standing' or 'lying'; iou : silhouette IoU of the fit against the mask."""
+
+    profile: np.ndarray
+    base: np.ndarray
+    axis: np.ndarray
+    height: float
+    resting: str
+    iou: float
+
+    @property
+    def T_cam_obj(self) -> np.ndarray:
+        z = self.axis / np.linalg.norm(self.axis)
+        helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
+        x = np.cross(helper, z)
+        x /= np.linalg.norm(x)
+        return make_T(np.stack([x, np.cross(z, x), z], axis=1), self.base)
+
+
+@dataclass
+class _Model:
+    base: np.ndarray
+    axis: np.ndarray
+    height: float
+    radii: np.ndarray  # (L,) metres at z_k = height * k / (L - 1)
+
+    def centres(self) -> np.ndarray:
+        z = np.linspace(0, self.height, len(self.radii))
+        return self.base + z[:, None] * self.axis
+
+
+def _ray(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
+    return np.array([(uv[0] - K[0, 2]) / K[0, 0], (uv[1] - K[1, 2]) / K[1, 1], 1.0])
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+class _Frame:
+    """An image window around the mask, rotated so that the projected axis points up."""
+
+    def __init__(self, mask: np.ndarray, centre_px: np.ndarray, up_px: np.ndarray, pad: int):
+        ys, xs = np.nonzero(mask)
+        self.x0, self.y0 = max(0, xs.min() - pad), max(0, ys.min() - pad)
+        x1, y1 = min(mask.shape[1], xs.max() + pad + 1), min(mask.shape[0], ys.max() + pad + 1)
+        self.shape = (y1 - self.y0, x1 - self.x0)
+        angle = np.degrees(np.arctan2(up_px[0], -up_px[1]))  # rotate 'up' onto image -y
+        c = (float(centre_px[0] - self.x0), float(centre_px[1] - self.y0))
+        size = int(np.ceil(np.hypot(*self.shape))) + 2
+        self.M = cv2.getRotationMatrix2D(c, angle, 1.0)
+        self.M[:, 2] += (size / 2 - c[0], size / 2 - c[1])
+        self.size = size
+        self.obs = self.warp(mask[self.y0:y1, self.x0:x1])
+
+    def warp(self, window: np.ndarray) -> np.ndarray:
+        return cv2.warpAffine(window.astype(np.uint8), self.M, (self.size, self.size),
+                              flags=cv2.INTER_NEAREST) > 0
+
+    def point(self, uv: np.ndarray) -> np.ndarray:
+        """Image pixel(s) (n, 2) to rotated-window coordinates (n, 2)."""
+        uv = np.atleast_2d(uv) - [self.x0, self.y0]
+        return uv @ self.M[:, :2].T + self.M[:, 2]
+
+
+def _extent(mask: np.ndarray) -> tuple[float, float, float, float]:
+    """(top row, bottom row, mean centre column) of a rotated mask, and its area."""
+    rows = np.nonzero(mask.any(1))[0]
+    cols = np.nonzero(mask)[1]
+    return float(rows[0]), float(rows[-1]), float(cols.mean()), float(mask.sum())
+
+
+def _orientation(mask: np.ndarray) -> float:
+    """Angle (radians, from the window's vertical, clockwise positive) of a mask's major axis."""
+    ys, xs = np.nonzero(mask)
+    if len(xs) < 3:
+        return 0.0
+    x, y = xs - xs.mean(), ys - ys.mean()
+    angle = 0.5 * np.arctan2(2 * (x * y).mean(), (x * x).mean() - (y * y).mean())  # from +x
+    return float(angle + np.pi / 2 if angle < 0 else angle - np.pi / 2)
+
+
+def _widths(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Width (pixels) of the mask on each of ``rows`` (clipped, rounded)."""
+    r = np.clip(np.rint(rows).astype(int), 0, mask.shape[0] - 1)
+    return mask[r].sum(1).astype(np.float64)
+
+
+def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: str,
+         iterations: int) -> tuple[_Model, float]:
+    """Refine ``model`` so that its silhouette matches ``mask``; returns (model, IoU)."""
+    n = plane.normal
+    for it in range(iterations + 1):
+        c0, c1 = project(model.base[None], K)[0], project((model.base + model.height
+                                                           * model.axis)[None], K)[0]
+        up = _unit(c1 - c0) if np.linalg.norm(c1 - c0) > 1e-6 else np.array([0.0, -1.0])
+        frame = _Frame(mask, (c0 + c1) / 2, up, pad=8)
+        sil = silhouette(model.centres(), model.axis, model.radii, K, mask.shape)
+        ren = frame.warp(sil[frame.y0:frame.y0 + frame.shape[0],
+                             frame.x0:frame.x0 + frame.shape[1]])
+        if it == iterations or not ren.any():
+            break
+        rows = frame.point(project(model.centres(), K))[:, 1]
+        ratio = (_widths(frame.obs, rows) + 0.5) / (_widths(ren, rows) + 0.5)
+        model.radii = np.clip(model.radii * np.clip(ratio, 0.7, 1.4) ** 0.8,
+                              0.002 * model.height, None)
+        t_obs, b_obs, x_obs, _ = _extent(frame.obs)
+        t_ren, b_ren, x_ren, _ = _extent(ren)
+        eps = 0.005
+        # pixels moved in the window per metre of each parameter (finite differences)
+        def shift(delta_base=np.zeros(3), delta_top=np.zeros(3)):
+            a = frame.point(project((model.base + delta_base)[None], K))[0]
+            b = frame.point(project((model.base + model.height * model.axis + delta_top)[None],
+                                    K))[0]
+            return a, b
+        a0, b0 = shift()
+        if resting == "standing":
+            away = _unit(plane.project_direction(model.base))
+            side = np.cross(n, away)
+            # top: the height; bottom: the base moves towards / away from the camera
+            _, bt = shift(delta_top=eps * model.axis)
+            dh = (t_obs - t_ren) / ((bt[1] - b0[1]) / eps) if abs(bt[1] - b0[1]) > 1e-9 else 0
+            a_away, _ = shift(delta_base=eps * away)
+            db = (b_obs - b_ren) / ((a_away[1] - a0[1]) / eps) if abs(a_away[1] - a0[1]) > 1e-9 \
+                else 0
+            a_side, _ = shift(delta_base=eps * side)
+            ds = (x_obs - x_ren) / ((a_side[0] - a0[0]) / eps) if abs(a_side[0] - a0[0]) > 1e-9 \
+                else 0
+            step = np.clip(0.8 * np.array([dh, db, ds]), -0.5 * model.height, 0.5 * model.height)
+            model.base = model.base + step[1] * away + step[2] * side
+            model.height = max(model.height + step[0], 1e-3)
+        else:
+            # lying: move each end along the axis, the axis sideways in the plane
+            side = _unit(np.cross(n, model.axis))
+            _, bt = shift(delta_top=eps * model.axis)
+            dt = (t_obs - t_ren) / ((bt[1] - b0[1]) / eps) if abs(bt[1] - b0[1]) > 1e-9 else 0
+            a_b, _ = shift(delta_base=-eps * model.axis)
+            db = (b_obs - b_ren) / ((a_b[1] - a0[1]) / eps) if abs(a_b[1] - a0[1]) > 1e-9 else 0
+            a_side, _ = shift(delta_base=eps * side)
+            ds = (x_obs - x_ren) / ((a_side[0] - a0[0]) / eps) if abs(a_side[0] - a0[0]) > 1e-9 \
+                else 0
+            step = np.clip(0.8 * np.array([dt, db, ds]), -0.5 * model.height, 0.5 * model.height)
+            model.base = model.base - step[1] * model.axis + step[2] * side
+            model.height = max(model.height + step[0] + step[1], 1e-3)
+            # turn the axis in the plane until the silhouette's orientation matches
+            d_img = _orientation(frame.obs) - _orientation(ren)
+            if abs(d_img) > 1e-3:
+                turned = rotation_about(n, 0.05) @ model.axis
+                tip = model.base + model.height * turned
+                p = frame.point(project(np.stack([model.base, tip]), K))
+                gain = (np.arctan2(p[1, 0] - p[0, 0], p[0, 1] - p[1, 1])) / 0.05
+                if abs(gain) > 1e-3:
+                    mid = model.base + 0.5 * model.height * model.axis
+                    model.axis = rotation_about(n, float(np.clip(0.8 * d_img / gain, -0.3, 0.3))
+                                                ) @ model.axis
+                    model.base = mid - 0.5 * model.height * model.axis
+            # the axis rests at the largest radius above the plane
+            lift = model.radii.max() - plane.height(model.base[None])[0]
+            model.base = model.base + lift * n
+    inter = (frame.obs & ren).sum()
+    union = (frame.obs | ren).sum()
+    return model, float(inter / union) if union else 0.0
+
+
+def _principal(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Centroid (2,), unit major direction (2,) and elongation of a mask's pixels."""
+    ys, xs = np.nonzero(mask)
+    pts = np.column_stack([xs, ys]).astype(np.float64)
+    centre = pts.mean(0)
+    evals, evecs = np.linalg.eigh(np.cov((pts - centre).T))
+    return centre, evecs[:, 1], float(np.sqrt(evals[1] / max(evals[0], 1e-9)))
+
+
+def _init_standing(mask, K, plane, levels) -> _Model | None:
+    centre, _, _ = _principal(mask)
+    p = plane.intersect(_ray(centre, K))
+    if not np.all(np.isfinite(p)):
+        return None
+    n = plane.normal
+    up = project(np.stack([p, p + 0.05 * n]), K)
+    up = _unit(up[1] - up[0])
+    ys, xs = np.nonzero(mask)
+    along = xs * up[0] + ys * up[1]
+    low = along <= along.min() + 1.5
+    bottom = np.array([xs[low].mean(), ys[low].mean()])
+    front = plane.intersect(_ray(bottom, K))
+    if not np.all(np.isfinite(front)):
+        return None
+    z = front[2]
+    width_px = mask.sum() / max(np.ptp(along), 1.0)
+    r = 0.5 * width_px * z / K[0, 0]
+    base = front + r * _unit(plane.project_direction(front))
+    top = np.array([xs[along >= along.max() - 1.5].mean(), ys[along >= along.max() - 1.5].mean()])
+    s = np.linspace(0.005, 1.5, 300)
+    px = project(base[None] + s[:, None] * n, K)
+    height = float(s[np.argmin(np.linalg.norm(px - top, axis=1))])
+    return _Model(base, n.copy(), height, np.full(levels, r))
+
+
+def _init_lying(mask, K, plane, levels) -> _Model | None:
+    centre, major, _ = _principal(mask)
+    ys, xs = np.nonzero(mask)
+    along = (xs - centre[0]) * major[0] + (ys - centre[1]) * major[1]
+    across = -(xs - centre[0]) * major[1] + (ys - centre[1]) * major[0]
+    mid = plane.intersect(_ray(centre, K))
+    if not np.all(np.isfinite(mid)):
+        return None
+    r = 0.5 * np.ptp(across) * mid[2] / K[0, 0]
+    raised = Plane(plane.normal, plane.offset - r)  # the axis runs r above the table
+    e1 = raised.intersect(_ray(centre + along.min() * major, K))
+    e2 = raised.intersect(_ray(centre + along.max() * major, K))
+    if not (np.all(np.isfinite(e1)) and np.all(np.isfinite(e2))):
+        return None
+    axis = _unit(plane.project_direction(e2 - e1))
+    length = float(np.linalg.norm(e2 - e1))
+    return _Model(e1, axis, max(length, 1e-3), np.full(levels, r))
+
+
+def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int = 40,
+                   iterations: int = 12, lying_margin: float = 0.03,
+                   allow_lying: bool = True) -> RevolutionFit:
+    """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
+
+    Raises ValueError when neither hypothesis can be set up (e.g. the mask is above the horizon).
+    """
+    fits = []
+    for resting, init in (("standing", _init_standing), ("lying", _init_lying)):
+        if resting == "lying" and not allow_lying:
+            continue
+        model = init(mask, K, plane, levels)
+        if model is None:
+            continue
+        model, iou = _fit(model, mask, K, plane, resting, iterations)
+        fits.append((iou + (lying_margin if resting == "standing" else 0.0), iou, resting, model))
+    if not fits:
+        raise ValueError("the mask does not meet the support plane: cannot place an object")
+    _, iou, resting, model = max(fits, key=lambda f: f[0])
+    radii, base, axis = model.radii, model.base, model.axis
+    if resting == "lying":
+        tail = max(2, len(radii) // 8)
+        if radii[-tail:].mean() > radii[:tail].mean():  # the wider end is the base
+            base, axis, radii = base + model.height * axis, -axis, radii[::-1]
+    z = np.linspace(0, 1, len(radii))
+    r = radii / model.height
+    profile = np.vstack([[0.0, 0.0], np.column_stack([r, z]), [0.0, 1.0]])
+    return RevolutionFit(profile, base, axis, model.height, resting, iou)

@@ -1,0 +1,202 @@
+"""Training-free segmentation of transparent objects from depth failures and colour.
+
+Glass and clear plastic break active depth sensors in recognisable ways: clusters of missing
+readings (often tracing the silhouette), readings of the table *through* the object, and noisy
+front-surface returns. Opaque objects stand on the same table with smooth readings above it.
+The steps:
+
+1. heights above the fitted support plane for every valid reading;
+2. evidence of glass: holes where the table should be seen, plus rough readings above the table
+   (the local residual against a median filter is far above the sensor's noise there);
+3. opaque evidence: smooth readings clearly above the table (these veto a candidate);
+4. candidates: morphological closing of the evidence, filling of regions enclosed by it (an
+   outline of holes around a see-through object), opening to drop thin artefacts such as the
+   dropouts along opaque edges, and an area floor;
+5. each candidate refined by GrabCut in a window around it (colour edges), seeded with the
+   evidence as probable foreground and the opaque pixels as background.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from sr3d_cli.geometry.camera import depth_to_points
+from sr3d_cli.geometry.plane import Plane
+
+
+@dataclass
+class Candidate:
+    """mask : (H, W) bool; score : share of the region backed by depth evidence, in [0, 1]."""
+
+    mask: np.ndarray
+    score: float
+
+
+def _disk(radius: int) -> np.ndarray:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+def _border_artefacts(holes: np.ndarray, max_share: float) -> np.ndarray:
+    """Hole components that touch the image border and are too big or too elongated to be an
+    object (beyond the table's range, the stereo camera's invalid left band)."""
+    h, w = holes.shape
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(holes.astype(np.uint8), 8)
+    drop = np.zeros(count, bool)
+    for k in range(1, count):
+        x, y, bw, bh, area = stats[k]
+        touches = x == 0 or y == 0 or x + bw == w or y + bh == h
+        if touches and (area > max_share * h * w or bh > 0.6 * h or bw > 0.6 * w):
+            drop[k] = True
+    return drop[labels]
+
+
+def roughness(depth_m: np.ndarray) -> np.ndarray:
+    """Local depth roughness ``(H, W) float32`` metres: mean absolute residual against a 5x5
+    median over valid readings (a clean step survives a median filter; noise does not)."""
+    valid = depth_m > 0
+    d_mm = np.clip(depth_m * 1000, 0, 65535).astype(np.uint16)
+    med = cv2.medianBlur(d_mm, 5).astype(np.float32) / 1000
+    used = valid & (med > 0)
+    resid = np.where(used, np.abs(depth_m - med), 0).astype(np.float32)
+    return cv2.blur(resid, (5, 5)) / np.maximum(cv2.blur(used.astype(np.float32), (5, 5)), 1e-3)
+
+
+def table_noise_model(rough: np.ndarray, depth_m: np.ndarray, on_table: np.ndarray,
+                      floor: float = 0.0005) -> np.ndarray:
+    """Expected roughness of an opaque surface at each pixel's depth, learnt from the table.
+
+    The median roughness of table pixels in depth bins, interpolated over depth; this adapts to
+    the sensor (stereo noise grows with depth squared) without a noise constant.
+    """
+    z = depth_m[on_table]
+    r = rough[on_table]
+    if z.size < 50:
+        return np.full(depth_m.shape, max(floor, 0.002), np.float32)
+    edges = np.quantile(z, np.linspace(0, 1, 9))
+    centres, levels = [], []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        sel = (z >= lo) & (z <= hi)
+        if sel.sum() >= 10:
+            centres.append(float(np.median(z[sel])))
+            levels.append(float(np.median(r[sel])))
+    levels = np.maximum(np.asarray(levels), floor)
+    model = np.interp(depth_m, centres, levels)
+    # beyond the table's depth range extrapolate with the z^2 law from the nearest bin
+    far, near = depth_m > centres[-1], depth_m < centres[0]
+    model[far] = levels[-1] * (depth_m[far] / centres[-1]) ** 2
+    model[near] = np.maximum(levels[0] * (depth_m[near] / centres[0]) ** 2, floor)
+    return model.astype(np.float32)
+
+
+def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_factor: float,
+                  max_object_share: float) -> tuple[np.ndarray, np.ndarray]:
+    """Glass evidence and opaque evidence, both ``(H, W) bool``.
+
+    Glass: holes where the table should be seen, and readings above the table that are
+    ``rough_factor`` times rougher than the table at that depth. Opaque: smooth readings
+    clearly above the table.
+    """
+    valid = depth_m > 0
+    plane_z = plane.depth_image(depth_m.shape, K)
+    holes = ~valid & (plane_z > 0)
+    holes &= ~_border_artefacts(holes, max_object_share)
+    height = np.where(valid, plane.height(depth_to_points(depth_m, K)), 0.0)
+    rough = roughness(depth_m)
+    on_table = valid & (np.abs(height) < 0.004 * np.maximum(depth_m, 0.3) ** 2 + 0.002)
+    expected = table_noise_model(rough, depth_m, on_table)
+    above = valid & (height > np.maximum(4 * expected, 0.004))
+    is_rough = rough > rough_factor * expected
+    glass = holes | (above & is_rough)
+    opaque = above & ~is_rough
+    opaque = cv2.morphologyEx(opaque.astype(np.uint8), cv2.MORPH_OPEN, _disk(2)) > 0
+    return glass, opaque
+
+
+def find_candidates(glass: np.ndarray, opaque: np.ndarray, *, min_area: int,
+                    close_radius: int) -> list[np.ndarray]:
+    """Connected regions of glass evidence, closed and filled, without opaque parts."""
+    region = cv2.morphologyEx(glass.astype(np.uint8), cv2.MORPH_CLOSE, _disk(close_radius)) > 0
+    region = ndimage.binary_fill_holes(region)
+    veto = cv2.dilate(opaque.astype(np.uint8), _disk(2)) > 0
+    region &= ~veto
+    region = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_OPEN, _disk(3)) > 0
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(region.astype(np.uint8), 8)
+    return [labels == k for k in range(1, count) if stats[k, cv2.CC_STAT_AREA] >= min_area]
+
+
+def grabcut_refine(rgb: np.ndarray, candidate: np.ndarray, opaque: np.ndarray, *,
+                   iterations: int, margin: int = 20) -> np.ndarray:
+    """Refine one candidate ``(H, W) bool`` with GrabCut in a window around it."""
+    h, w = candidate.shape
+    ys, xs = np.nonzero(candidate)
+    pad = max(margin, int(0.3 * max(np.ptp(ys), np.ptp(xs))))
+    y0, y1 = max(0, ys.min() - pad), min(h, ys.max() + pad + 1)
+    x0, x1 = max(0, xs.min() - pad), min(w, xs.max() + pad + 1)
+    cand = candidate[y0:y1, x0:x1].astype(np.uint8)
+    gc = np.full(cand.shape, cv2.GC_BGD, np.uint8)
+    gc[cv2.dilate(cand, _disk(max(3, pad // 3))) > 0] = cv2.GC_PR_BGD
+    gc[cand > 0] = cv2.GC_PR_FGD
+    core = cv2.erode(cand, _disk(4)) > 0
+    gc[core] = cv2.GC_FGD
+    gc[opaque[y0:y1, x0:x1]] = cv2.GC_BGD
+    if not (gc == cv2.GC_FGD).any() or not np.isin(gc, (cv2.GC_BGD, cv2.GC_PR_BGD)).any():
+        return candidate
+    bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+    image = np.ascontiguousarray(rgb[y0:y1, x0:x1, ::-1])
+    cv2.grabCut(image, gc, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
+    # GrabCut may only add to the depth candidate (it is the high-precision part)
+    fg = np.isin(gc, (cv2.GC_FGD, cv2.GC_PR_FGD)) | (cand > 0)
+    fg = ndimage.binary_fill_holes(fg)
+    # keep the component(s) overlapping the candidate
+    count, labels = cv2.connectedComponents(fg.astype(np.uint8), connectivity=8)
+    keep = np.unique(labels[(cand > 0) & fg])
+    fg = np.isin(labels, keep[keep > 0])
+    out = np.zeros_like(candidate)
+    out[y0:y1, x0:x1] = fg
+    return out
+
+
+def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, plane: Plane, *,
+                          rough_factor: float = 2.0, min_area: int = 150, close_radius: int = 6,
+                          grabcut_iterations: int = 4, max_object_share: float = 0.25
+                          ) -> list[Candidate]:
+    """Instance candidates of transparent objects in one RGB-D frame.
+
+    rgb : (H, W, 3) uint8; depth_m : (H, W) metres (0 = none); K : (3, 3); plane : the table.
+    Returns candidates sorted by area (largest first); masks do not overlap.
+    """
+    glass, opaque = evidence_maps(depth_m, K, plane, rough_factor=rough_factor,
+                                  max_object_share=max_object_share)
+    pieces = find_candidates(glass, opaque, min_area=min_area // 4, close_radius=close_radius)
+    if grabcut_iterations > 0:
+        pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
+    out = []
+    for mask in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
+        if mask.sum() >= min_area:
+            out.append(Candidate(mask, float(glass[mask].mean())))
+    return sorted(out, key=lambda c: -int(c.mask.sum()))
+
+
+def merge_pieces(pieces: list[np.ndarray], shape: tuple[int, int], *, radius: int
+                 ) -> list[np.ndarray]:
+    """Join pieces closer than ``radius`` pixels into one region each (closing, then filling),
+    so that an object whose evidence came in several parts becomes one instance."""
+    if not pieces:
+        return []
+    union = np.zeros(shape, np.uint8)
+    for p in pieces:
+        union |= p.astype(np.uint8)
+    groups = cv2.dilate(union, _disk(radius // 2))
+    count, labels = cv2.connectedComponents(groups, connectivity=8)
+    out, taken = [], np.zeros(shape, bool)
+    for k in range(1, count):
+        region = (union > 0) & (labels == k)
+        region = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_CLOSE, _disk(radius)) > 0
+        region = ndimage.binary_fill_holes(region) & ~taken
+        taken |= region
+        out.append(region)
+    return out
