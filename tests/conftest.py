@@ -51,3 +51,18 @@ def realdata() -> Path:
     if not REALDATA.is_dir():
         pytest.skip(f"shared real frames not present at {REALDATA} (they live outside the repo)")
     return REALDATA
+
+
+@pytest.fixture(scope="session")
+def synth_set(tmp_path_factory) -> Path:
+    """Six synthetic scenes (seed 303, used only by the stage tests), shared by the session."""
+    from sr3d_cli.config import SynthConfig
+    from sr3d_cli.render import make_renderer
+    from sr3d_cli.synth.generate import write_scene
+
+    root = tmp_path_factory.mktemp("synth303")
+    cfg = SynthConfig(seed=303, views=1)
+    renderer = make_renderer("auto")
+    for i in range(6):
+        write_scene(root / f"scene_{i:04d}", i, cfg, renderer)
+    return root

@@ -1,0 +1,189 @@
+"""sr3d reconstruct: surfaces of revolution against known shapes, ONNX and library plug-ins."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+from click.testing import CliRunner
+
+from sr3d_cli.cli import cli
+from sr3d_cli.config import IOConfig, ReconstructConfig
+from sr3d_cli.errors import InputError
+from sr3d_cli.evaluate import chamfer_distance
+from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.revolution import profile_from_mesh, revolve, silhouette
+from sr3d_cli.io.formats import discover_scenes
+from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_mask
+from sr3d_cli.reconstruct.revolution_fit import fit_revolution
+from tests import onnx_builders
+
+K = np.array([[600.0, 0, 319.5], [0, 600, 239.5], [0, 0, 1]])
+
+
+def _table(elevation_deg: float, distance: float) -> Plane:
+    """Table plane seen by a camera looking down at ``elevation_deg`` towards a point at
+    ``distance`` along the optical axis."""
+    e = np.radians(elevation_deg)
+    normal = np.array([0.0, -np.cos(e), -np.sin(e)])  # world up in the camera frame
+    point = np.array([0.0, 0.0, distance])
+    return Plane(normal, float(-normal @ point))
+
+
+def _render(profile_m, base, axis, plane=None):
+    z = profile_m[1:-1, 1]
+    centres = base + z[:, None] * axis
+    return silhouette(centres, axis, profile_m[1:-1, 0], K, (480, 640))
+
+
+@pytest.mark.parametrize("elevation", [30.0, 60.0])
+def test_standing_cylinder_recovered(elevation):
+    plane = _table(elevation, 0.6)
+    base = plane.intersect(np.array([0.02, 0.05, 1.0]))
+    r, h = 0.03, 0.12
+    prof = np.array([[0, 0], [r, 0], [r, h], [0, h]])
+    mask = _render(prof, base, plane.normal)
+    fit = fit_revolution(mask, K, plane)
+    assert fit.resting == "standing"
+    assert fit.height == pytest.approx(h, rel=0.03)
+    assert np.median(fit.profile[1:-1, 0]) * fit.height == pytest.approx(r, rel=0.05)
+    assert np.linalg.norm(fit.base - base) < 0.004
+    assert fit.iou > 0.95
+
+
+def test_lying_bottle_recovered_with_its_base_at_the_wide_end():
+    plane = _table(45.0, 0.55)
+    axis = np.array([1.0, 0, 0]) - (np.array([1.0, 0, 0]) @ plane.normal) * plane.normal
+    axis = axis / np.linalg.norm(axis)
+    r = 0.035
+    prof = np.array([[0, 0], [r, 0], [r, 0.13], [0.012, 0.18], [0.012, 0.22], [0, 0.22]])
+    base = plane.intersect(np.array([-0.1, 0.02, 1.0])) + r * plane.normal
+    mask = _render(prof, base, axis)
+    fit = fit_revolution(mask, K, plane)
+    assert fit.resting == "lying"
+    assert fit.height == pytest.approx(0.22, rel=0.05)
+    assert np.degrees(np.arccos(abs(fit.axis @ axis))) < 5
+    assert fit.axis @ axis > 0  # base at the wide end
+    truth = revolve(prof / 0.22)
+    assert chamfer_distance(revolve(fit.profile), truth) < 0.05
+
+
+def test_shape_error_on_generated_glassware(synth_set):
+    """Chamfer / height against the ground-truth mesh's outer envelope, ground-truth masks."""
+    errors = []
+    for source in discover_scenes(synth_set, IOConfig(), None):
+        fid = source.frame_ids()[0]
+        frame = source.load_frame(fid)
+        gt = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
+        from sr3d_cli.segment import support_plane
+        from sr3d_cli.config import PlaneConfig
+
+        plane = support_plane(frame.depth_m, frame.camera.K, PlaneConfig(), exclude=gt > 0)
+        for obj in source.load_gt_objects(fid)["objects"]:
+            mask = gt == obj["id"]
+            if obj["pose"] != "standing" or mask.sum() < 300 or mask[0].any() or \
+                    mask[:, 0].any() or mask[-1].any() or mask[:, -1].any():
+                continue
+            fit = fit_revolution(mask, frame.camera.K, plane)
+            truth = trimesh.load(source.root / obj["mesh"])
+            errors.append(chamfer_distance(revolve(fit.profile), revolve(profile_from_mesh(truth))))
+    assert len(errors) >= 5
+    assert np.median(errors) < 0.03
+
+
+def test_bad_masks_are_refused_with_the_reason():
+    cfg = ReconstructConfig()
+    mask = np.zeros((50, 60), bool)
+    with pytest.raises(ObjectError, match="empty"):
+        check_mask(mask, cfg)
+    mask[10:14, 10:14] = True
+    with pytest.raises(ObjectError, match="16 px"):
+        check_mask(mask, cfg)
+    mask[0:30, 20:40] = True
+    with pytest.raises(ObjectError, match="border"):
+        check_mask(mask, cfg)
+    check_mask(mask, ReconstructConfig(allow_border=True))
+
+
+def _object_mask():
+    mask = np.zeros((120, 160), bool)
+    mask[30:90, 60:100] = True
+    return np.zeros((120, 160, 3), np.uint8), mask
+
+
+def test_onnx_density_grid_gives_the_sphere(tmp_path):
+    path = onnx_builders.density_sphere(tmp_path / "grid.onnx")
+    cfg = ReconstructConfig(backend="onnx", onnx_model=str(path))
+    rgb, mask = _object_mask()
+    out = Reconstructor(cfg)(rgb, mask, np.eye(3), None)
+    assert out.mesh.is_watertight and out.mesh.volume > 0
+    assert out.mesh.bounds[1][2] - out.mesh.bounds[0][2] == pytest.approx(1.0)
+    # before normalisation the iso-surface radius is sqrt(0.25 - 25 / 1e4)
+    from sr3d_cli.reconstruct.onnx_models import DensityGridModel
+
+    raw = DensityGridModel(cfg)(rgb, mask)
+    radius = np.linalg.norm(raw.vertices, axis=1)
+    assert np.median(radius) == pytest.approx(np.sqrt(0.25 - 0.0025), abs=0.01)
+
+
+def test_onnx_triplane_pair_gives_the_sphere(tmp_path):
+    enc, dec = onnx_builders.triplane_pair(tmp_path / "enc.onnx", tmp_path / "dec.onnx")
+    cfg = ReconstructConfig(backend="onnx", onnx_model=str(enc), onnx_decoder=str(dec),
+                            onnx_resolution=40)
+    from sr3d_cli.reconstruct.onnx_models import TriplaneModel
+
+    rgb, mask = _object_mask()
+    raw = TriplaneModel(cfg)(rgb, mask)
+    radius = np.linalg.norm(raw.vertices, axis=1)
+    assert np.median(radius) == pytest.approx(np.sqrt(0.25 - 0.0025), abs=0.02)
+    assert raw.is_watertight
+
+
+def test_onnx_problems_are_clear(tmp_path):
+    path = onnx_builders.density_sphere(tmp_path / "grid.onnx")
+    cfg = ReconstructConfig(backend="onnx", onnx_model=str(path), onnx_threshold=1e9)
+    rgb, mask = _object_mask()
+    with pytest.raises(ValueError, match="never crosses the threshold"):
+        Reconstructor(cfg)(rgb, mask, np.eye(3), None)
+    enc, _ = onnx_builders.triplane_pair(tmp_path / "enc.onnx", tmp_path / "dec.onnx")
+    with pytest.raises(InputError, match="expected"):
+        Reconstructor(ReconstructConfig(backend="onnx", onnx_model=str(enc),
+                                        onnx_decoder=str(path)))
+
+
+def test_library_picks_by_label_then_by_shape(tmp_path):
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    tall = revolve(np.array([[0, 0], [0.02, 0], [0.02, 0.2], [0, 0.2]]))
+    squat = revolve(np.array([[0, 0], [0.05, 0], [0.05, 0.06], [0, 0.06]]))
+    tall.export(lib / "test_tube.ply")
+    (squat.apply_scale(1000)).export(lib / "dish_mm.stl")  # millimetres: normalised on load
+    plane = _table(50.0, 0.5)
+    base = plane.intersect(np.array([0.0, 0.05, 1.0]))
+    mask = _render(np.array([[0, 0], [0.045, 0], [0.045, 0.05], [0, 0.05]]), base, plane.normal)
+    rec = Reconstructor(ReconstructConfig(backend="library", library=str(lib)))
+    assert rec(np.zeros((480, 640, 3), np.uint8), mask, K, plane, "").meta["library_mesh"] \
+        == "dish_mm"
+    out = rec(np.zeros((480, 640, 3), np.uint8), mask, K, plane, "a test_tube")
+    assert out.meta["library_mesh"] == "test_tube"
+    assert out.mesh.bounds[1][2] == pytest.approx(1.0)
+
+
+def test_cli_reconstruct_writes_watertight_meshes_and_object_messages(synth_set, tmp_path):
+    out = tmp_path / "out"
+    scene = str(synth_set / "scene_0001")
+    runner = CliRunner()
+    result = runner.invoke(cli, ["reconstruct", scene, "--out", str(out), "-q"])
+    assert result.exit_code == 1 and "run `sr3d segment` first" in result.output
+    result = runner.invoke(cli, ["reconstruct", scene, "--out", str(out), "--masks", "gt", "-q"])
+    assert result.exit_code == 0, result.output
+    plys = sorted((out / "meshes" / "000000").glob("*.ply"))
+    assert plys
+    for ply in plys:
+        mesh = trimesh.load(ply)
+        assert mesh.is_watertight and mesh.volume > 0
+        assert mesh.bounds[0][2] == pytest.approx(0) and mesh.bounds[1][2] == pytest.approx(1)
+        meta = json.loads(ply.with_suffix(".json").read_text())
+        assert meta["resting"] in ("standing", "lying")

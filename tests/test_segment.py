@@ -1,0 +1,126 @@
+"""sr3d segment: training-free masks scored against ground truth, imported masks, SAM via ONNX."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from sr3d_cli.cli import cli
+from sr3d_cli.config import PlaneConfig, SegmentConfig
+from sr3d_cli.errors import InputError
+from sr3d_cli.evaluate import instance_ious
+from sr3d_cli.io.atomic import write_png
+from sr3d_cli.io.images import read_mask
+from sr3d_cli.segment import Segmenter, import_masks, support_plane
+from tests import onnx_builders
+
+
+def test_support_plane_recovers_a_tilted_table():
+    K = np.array([[500.0, 0, 160], [0, 500, 120], [0, 0, 1]])
+    n_true = np.array([0.0, -0.8, -0.6])  # towards the camera, table seen from above
+    d_true = 0.5
+    v, u = np.mgrid[0:240, 0:320]
+    rays = np.stack([(u - 160) / 500, (v - 120) / 500, np.ones_like(u, float)], -1)
+    depth = (-d_true / (rays @ n_true)).astype(np.float32)
+    rng = np.random.default_rng(0)
+    depth += rng.normal(0, 0.001, depth.shape).astype(np.float32)
+    depth[50:90, 100:160] = 0.3  # a box in front
+    depth[rng.uniform(size=depth.shape) < 0.1] = 0  # dropouts
+    plane = support_plane(depth, K, PlaneConfig())
+    assert np.degrees(np.arccos(plane.normal @ n_true)) < 0.5
+    assert abs(plane.offset - d_true) < 0.003
+
+
+def test_training_free_masks_match_ground_truth(synth_set):
+    """Floors on six generated scenes (measured 20+ frame numbers are in the closing note)."""
+    segmenter = Segmenter(SegmentConfig(), PlaneConfig())
+    from sr3d_cli.config import IOConfig
+    from sr3d_cli.io.formats import discover_scenes
+
+    ious = []
+    for source in discover_scenes(synth_set, IOConfig(), None):
+        fid = source.frame_ids()[0]
+        frame = source.load_frame(fid)
+        inst = segmenter(fid, frame.rgb, frame.depth_m, frame.camera.K)
+        gt = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
+        ious += list(instance_ious(inst.ids, gt).values())
+        for obj in inst.objects:  # records agree with the id image
+            ys, xs = np.nonzero(inst.ids == obj["id"])
+            assert obj["bbox"] == [xs.min(), ys.min(), xs.max(), ys.max()]
+    assert len(ious) >= 8
+    assert np.mean(ious) >= 0.75
+    assert np.mean(np.array(ious) > 0.5) >= 0.8
+
+
+def test_import_splits_binary_masks_and_keeps_ids(tmp_path):
+    binary = np.zeros((20, 30), np.uint8)
+    binary[2:6, 2:8] = 255
+    binary[10:18, 20:28] = 255
+    write_png(tmp_path / "a.png", binary)
+    inst = import_masks(tmp_path, "a", (20, 30), "glass", min_area=5)
+    assert [o["id"] for o in inst.objects] == [1, 2]
+    assert inst.objects[1]["bbox"] == [20, 10, 27, 17]
+    ids = np.zeros((20, 30), np.uint8)
+    ids[2:6, 2:8] = 7
+    ids[10:12, 20:22] = 9  # 4 px: below min_area, dropped with a note
+    write_png(tmp_path / "b.png", ids)
+    inst = import_masks(tmp_path, "b", (20, 30), "glass", min_area=5)
+    assert len(inst.objects) == 1 and inst.notes
+    with pytest.raises(InputError, match="no imported mask"):
+        import_masks(tmp_path, "c", (20, 30), "glass", min_area=5)
+    with pytest.raises(InputError, match="30x20"):
+        import_masks(tmp_path, "a", (10, 30), "glass", min_area=5)
+
+
+@pytest.fixture
+def sam_files(tmp_path):
+    return (onnx_builders.sam_encoder(tmp_path / "enc.onnx"),
+            onnx_builders.sam_box_decoder(tmp_path / "dec.onnx"))
+
+
+def test_sam_onnx_masks_follow_the_box_prompts(tmp_path, sam_files):
+    boxes = tmp_path / "boxes.json"
+    boxes.write_text(json.dumps({"f": [[10, 5, 20, 30], [40, 10, 60, 20]]}))
+    cfg = SegmentConfig(backend="sam-onnx", sam_encoder=str(sam_files[0]),
+                        sam_decoder=str(sam_files[1]), boxes=str(boxes), min_area=5)
+    inst = Segmenter(cfg, PlaneConfig())("f", np.zeros((48, 80, 3), np.uint8),
+                                         np.ones((48, 80), np.float32), np.eye(3))
+    assert [o["bbox"] for o in inst.objects] == [[10, 5, 20, 30], [40, 10, 60, 20]]
+    assert inst.objects[0]["score"] == pytest.approx(0.9)
+
+
+def test_sam_tensor_mismatch_is_one_clear_error(tmp_path, sam_files):
+    bad = onnx_builders.sam_box_decoder(tmp_path / "bad.onnx", masks_name="mask_logits")
+    cfg = SegmentConfig(backend="sam-onnx", sam_encoder=str(sam_files[0]), sam_decoder=str(bad))
+    with pytest.raises(InputError) as err:
+        Segmenter(cfg, PlaneConfig())
+    text = str(err.value)
+    assert "bad.onnx" in text and "expected" in text and "masks" in text and "mask_logits" in text
+    (tmp_path / "junk.onnx").write_bytes(b"not a model")
+    with pytest.raises(InputError, match="not a loadable ONNX"):
+        Segmenter(SegmentConfig(backend="sam-onnx", sam_encoder=str(tmp_path / "junk.onnx"),
+                                sam_decoder=str(bad)), PlaneConfig())
+    with pytest.raises(InputError, match="not found"):
+        Segmenter(SegmentConfig(backend="sam-onnx", sam_encoder=str(tmp_path / "none.onnx"),
+                                sam_decoder=str(bad)), PlaneConfig())
+
+
+def test_cli_segment_writes_masks_and_records(synth_set, tmp_path):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["segment", str(synth_set / "scene_0000"), "--out", str(out),
+                                      "-q", "--prompt", "glass cup"])
+    assert result.exit_code == 0, result.output
+    ids = read_mask(out / "masks" / "000000.png")
+    meta = json.loads((out / "masks" / "000000.json").read_text())
+    assert sorted(np.unique(ids[ids > 0]).tolist()) == [o["id"] for o in meta["objects"]]
+    assert all(o["label"] == "glass cup" for o in meta["objects"])
+
+
+def test_cli_segment_bad_model_is_a_usage_error(native_scene, tmp_path):
+    result = CliRunner().invoke(cli, ["segment", str(native_scene), "--backend", "sam-onnx",
+                                      "--set", f"segment.sam_encoder={tmp_path}/x.onnx"])
+    assert result.exit_code == 2
+    assert "x.onnx" in result.output and "not found" in result.output
