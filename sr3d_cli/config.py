@@ -65,6 +65,9 @@ class ReconstructConfig:
     iterations: int = 12
     sections: int = 48
     lying_margin: float = 0.03
+    open_top_ratio: float = 0.7
+    open_wall: float = 0.0025
+    open_base: float = 0.008
     onnx_model: str = ""
     onnx_decoder: str = ""
     onnx_threshold: float = 25.0
@@ -72,6 +75,31 @@ class ReconstructConfig:
     onnx_radius: float = 0.87
     foreground_ratio: float = 0.85
     library: str = ""
+
+
+@dataclass
+class AlignConfig:
+    mode: str = "sr3d"
+    views: int = 162
+    rolls: int = 12
+    yaw_steps: int = 36
+    max_rests: int = 6
+    alpha: float = 0.5
+    beta: float = 0.3
+    gamma: float = 0.2
+    patches: int = 4
+    contact_points: int = 30
+    top_candidates: int = 3
+    upright_prior: float = 0.05
+    hint_accept: float = 0.9
+    refine: bool = True
+    refine_evals: int = 80
+    window: int = 160
+
+
+@dataclass
+class RepairConfig:
+    outside_render: str = "keep"
 
 
 @dataclass
@@ -109,6 +137,8 @@ class Config:
     plane: PlaneConfig = field(default_factory=PlaneConfig)
     segment: SegmentConfig = field(default_factory=SegmentConfig)
     reconstruct: ReconstructConfig = field(default_factory=ReconstructConfig)
+    align: AlignConfig = field(default_factory=AlignConfig)
+    repair: RepairConfig = field(default_factory=RepairConfig)
     synth: SynthConfig = field(default_factory=SynthConfig)
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
 
@@ -119,6 +149,8 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "segment.backend": ("training-free", "sam-onnx", "import"),
     "reconstruct.backend": ("revolution", "onnx", "library"),
     "reconstruct.masks": ("segment", "gt"),
+    "align.mode": ("sr3d", "paper"),
+    "repair.outside_render": ("keep", "plane"),
     "evaluate.holes": ("full", "ignore"),
     "evaluate.mask": ("auto", "gt", "pred"),
 }

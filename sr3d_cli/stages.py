@@ -97,3 +97,69 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
         summary[str(k)] = {"mesh": f"meshes/{fid}/{k}.ply", **result.meta}
         written += 1
     return written, messages
+
+
+def load_mesh(path) -> trimesh.Trimesh:
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:
+        raise ValueError(f"cannot read mesh {path} ({exc})") from None
+    return mesh
+
+
+def _pose_hint(path) -> tuple[np.ndarray, float] | None:
+    """The pose a reconstruction fitted on its way (meshes/<frame>/<k>.json), if any."""
+    try:
+        hint = json.loads(path.read_text(encoding="utf-8"))["pose_hint"]
+        return np.asarray(hint["T_cam_obj"], dtype=np.float64), float(hint["scale"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
+                bop: bool = False) -> tuple[list[dict], list[str]]:
+    """Place every reconstructed object; writes ``poses/<id>.json``. Returns (objects, messages)."""
+    source, fid = frame.scene, frame.frame_id
+    ids, records = load_instances(source, fid, frame.depth_m.shape, which_masks)
+    plane, why = frame_plane(frame, ids, plane_cfg)
+    objects, messages = [], []
+    for k in sorted(records):
+        path = mesh_path(source, fid, k)
+        if not path.is_file():
+            hit = source.stage_file(f"meshes/{fid}", str(k), (".ply", ".obj", ".stl"))
+            path = hit if hit is not None else path
+        try:
+            if not path.is_file():
+                raise ValueError("no mesh: run `sr3d reconstruct` first")
+            if plane is None:
+                raise ValueError(why)
+            placement = aligner(load_mesh(path), ids == k, frame.camera.K, plane, frame.depth_m,
+                                hint=_pose_hint(path.with_suffix(".json")))
+        except ValueError as exc:
+            messages.append(f"object {k}: {exc}")
+            continue
+        objects.append({"id": k, "label": records[k].get("label", ""),
+                        "mesh": f"meshes/{fid}/{k}.ply", "T_cam_obj": placement.T_cam_obj,
+                        "scale": placement.scale, "scores": placement.scores,
+                        "diagnostics": placement.diagnostics})
+    document = {"objects": objects, "failed": messages,
+                "plane": plane.to_json() if plane is not None else None}
+    write_json(source.output_path("poses", fid, ".json"), document)
+    return objects, messages
+
+
+def load_poses(source: SceneSource, frame_id: str) -> list[dict]:
+    path = source.stage_file("poses", frame_id, (".json",))
+    if path is None:
+        raise InputError(source.out / "poses" / f"{frame_id}.json",
+                         "no poses: run `sr3d align` first")
+    try:
+        return json.loads(path.read_text(encoding="utf-8")).get("objects", [])
+    except (OSError, ValueError) as exc:
+        raise InputError(path, f"cannot read poses ({exc})") from None
+
+
+def depth_suffix(source: SceneSource, frame_id: str) -> str:
+    """Repaired depth keeps the input's encoding (PNG with depth_scale, EXR or npy metres)."""
+    suffix = source.depth_path(frame_id).suffix.lower()
+    return suffix if suffix in (".png", ".exr", ".npy") else ".png"

@@ -5,8 +5,10 @@ from __future__ import annotations
 import click
 
 from sr3d_cli import __version__
+from sr3d_cli.cli.align import align
 from sr3d_cli.cli.evaluate import evaluate
 from sr3d_cli.cli.reconstruct import reconstruct
+from sr3d_cli.cli.repair_depth import repair_depth
 from sr3d_cli.cli.segment import segment
 from sr3d_cli.cli.synth import synth
 
@@ -24,6 +26,8 @@ def cli():
 cli.add_command(synth)
 cli.add_command(segment)
 cli.add_command(reconstruct)
+cli.add_command(align)
+cli.add_command(repair_depth)
 cli.add_command(evaluate)
 
 

@@ -48,6 +48,17 @@ def revolve(profile: np.ndarray, sections: int = 48) -> trimesh.Trimesh:
     return mesh
 
 
+def open_vessel(outer: list, wall: float, base: float) -> np.ndarray:
+    """Close an outer wall ``[(0, 0), ..., (r_rim, h)]`` with a rim and an inner wall."""
+    outer = np.asarray(outer, dtype=np.float64)
+    inner = outer[1:].copy()[::-1]
+    inner[:, 0] = np.maximum(inner[:, 0] - wall, wall * 0.5)
+    inner[:, 1] = np.maximum(inner[:, 1], base)
+    keep = np.concatenate([[True], np.diff(inner[:, 1]) < -1e-6])  # strictly descending in z
+    inner = inner[keep]
+    return np.vstack([outer, inner, [[0.0, base]]])
+
+
 def silhouette(centres: np.ndarray, axis: np.ndarray, radii: np.ndarray, K: np.ndarray,
                shape: tuple[int, int], origin: tuple[int, int] = (0, 0), n_theta: int = 32
                ) -> np.ndarray:

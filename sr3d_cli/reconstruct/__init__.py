@@ -15,7 +15,7 @@ import trimesh
 
 from sr3d_cli.config import ReconstructConfig
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.revolution import revolve
+from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.reconstruct.revolution_fit import fit_revolution
 
 
@@ -90,4 +90,12 @@ class Reconstructor:
             name, mesh = self.library.pick(label, fit.profile)
             meta["library_mesh"] = name
             return Reconstruction(mesh, meta)
-        return Reconstruction(revolve(fit.profile, cfg.sections), meta)
+        profile = fit.profile
+        if cfg.open_top_ratio > 0 and fit.resting == "standing" and \
+                profile[-2, 0] >= cfg.open_top_ratio * profile[1:-1, 0].max():
+            # a wide mouth: drinking glass, beaker, goblet. Model it open, with a wall and a
+            # floor, so the depth inside the vessel is rendered, not a lid at the rim
+            profile = open_vessel(profile[:-1], cfg.open_wall / fit.height,
+                                  cfg.open_base / fit.height)
+            meta["open_top"] = True
+        return Reconstruction(revolve(profile, cfg.sections), meta)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from sr3d_cli.geometry.revolution import revolve
+from sr3d_cli.geometry.revolution import open_vessel, revolve
 
 KINDS = ("bottle", "glass", "flask", "goblet", "beaker", "vial")
 
@@ -42,17 +42,6 @@ def _arc(r0, z0, r1, z1, n, bulge):
     r = r0 + (r1 - r0) * t + bulge * np.sin(np.pi * t)
     z = z0 + (z1 - z0) * t
     return list(zip(r, z))
-
-
-def _open_vessel(outer: list, wall: float, base: float) -> np.ndarray:
-    """Close an outer wall ``[(0, 0), ..., (r_rim, h)]`` with a rim and an inner wall."""
-    outer = np.asarray(outer, dtype=np.float64)
-    inner = outer[1:].copy()[::-1]
-    inner[:, 0] = np.maximum(inner[:, 0] - wall, wall * 0.5)
-    inner[:, 1] = np.maximum(inner[:, 1], base)
-    keep = np.concatenate([[True], np.diff(inner[:, 1]) < -1e-6])  # strictly descending in z
-    inner = inner[keep]
-    return np.vstack([outer, inner, [[0.0, base]]])
 
 
 def make_glassware(kind: str, rng: np.random.Generator) -> Glassware:
@@ -83,11 +72,11 @@ def make_glassware(kind: str, rng: np.random.Generator) -> Glassware:
         rb, h = u(0.025, 0.035), u(0.08, 0.14)
         rt = rb * u(1.0, 1.3)
         outer = [(0, 0), (rb * 0.95, 0), (rb, 0.004)] + _arc(rb, 0.004, rt, h, 4, 0.0)
-        return Glassware(kind, _open_vessel(outer, wall, u(0.006, 0.012)), h)
+        return Glassware(kind, open_vessel(outer, wall, u(0.006, 0.012)), h)
     if kind == "beaker":
         r, h = u(0.025, 0.05), u(0.06, 0.13)
         outer = [(0, 0), (r * 0.96, 0), (r, 0.003), (r, h - 0.003), (r * 1.06, h)]
-        return Glassware(kind, _open_vessel(outer, wall, u(0.003, 0.005)), h)
+        return Glassware(kind, open_vessel(outer, wall, u(0.003, 0.005)), h)
     if kind == "goblet":
         rf, hs, h = u(0.028, 0.04), u(0.05, 0.09), u(0.14, 0.22)
         rbowl, rrim = u(0.035, 0.048), None
@@ -100,5 +89,5 @@ def make_glassware(kind: str, rng: np.random.Generator) -> Glassware:
         r_bowl = np.minimum(r_bowl, rbowl)
         r_bowl[-3:] = np.linspace(r_bowl[-4], rrim, 4)[1:]
         outer += list(zip(r_bowl, hs + bowl_h * t))
-        return Glassware(kind, _open_vessel(outer, wall, hs + 0.008), h)
+        return Glassware(kind, open_vessel(outer, wall, hs + 0.008), h)
     raise ValueError(f"unknown glassware kind {kind!r}; choose from {', '.join(KINDS)}")

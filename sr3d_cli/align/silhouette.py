@@ -1,0 +1,58 @@
+"""Fast mesh silhouettes for pose search: projected triangles filled with OpenCV.
+
+Only the outline matters while searching for a pose, so no depth test is needed: every triangle
+in front of the camera is filled. Full renders (depth, ids, normals) use :mod:`sr3d_cli.render`.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from sr3d_cli.geometry.transforms import place_points
+
+
+def project_mesh(vertices_obj: np.ndarray, R: np.ndarray, t: np.ndarray, scale: float,
+                 K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels ``(n, 2)`` and camera-frame points ``(n, 3)`` of object-frame vertices."""
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    pts = place_points(vertices_obj, T, scale)
+    z = np.where(pts[:, 2] > 0.01, pts[:, 2], np.nan)  # behind the near plane: no pixel
+    uv = np.column_stack([pts[:, 0] / z * K[0, 0] + K[0, 2], pts[:, 1] / z * K[1, 1] + K[1, 2]])
+    return uv, pts
+
+
+def fill_silhouette(uv: np.ndarray, faces: np.ndarray, shape: tuple[int, int],
+                    origin: tuple[float, float] = (0.0, 0.0), zoom: float = 1.0) -> np.ndarray:
+    """Silhouette ``shape bool`` of triangles ``faces (m, 3)`` over pixels ``uv (n, 2)``,
+    drawn in a window whose top-left pixel is ``origin``, magnified by ``zoom``."""
+    pix = (uv - np.asarray(origin)) * zoom
+    tri = pix[faces]
+    tri = tri[np.isfinite(tri).all(axis=(1, 2))]
+    limit = 4.0 * max(shape)  # far-off vertices only slow the filling down
+    tris = np.rint(np.clip(tri, -limit, limit) * 4).astype(np.int32)  # 2 sub-pixel bits
+    out = np.zeros(shape, np.uint8)
+    cv2.fillPoly(out, list(tris), 1, lineType=cv2.LINE_8, shift=2)
+    return out > 0
+
+
+def crop_square(mask: np.ndarray, size: int) -> np.ndarray:
+    """The mask's bounding box, centred in a ``size`` x ``size`` float32 image (aspect kept)."""
+    ys, xs = np.nonzero(mask)
+    if len(xs) == 0:
+        return np.zeros((size, size), np.float32)
+    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+    crop = mask[y0:y1, x0:x1].astype(np.float32)
+    side = max(y1 - y0, x1 - x0)
+    canvas = np.zeros((side, side), np.float32)
+    oy, ox = (side - (y1 - y0)) // 2, (side - (x1 - x0)) // 2
+    canvas[oy:oy + y1 - y0, ox:ox + x1 - x0] = crop
+    return cv2.resize(canvas, (size, size), interpolation=cv2.INTER_AREA)
+
+
+def aspect(mask: np.ndarray) -> float:
+    ys, xs = np.nonzero(mask)
+    if len(xs) == 0:
+        return 1.0
+    return float((np.ptp(xs) + 1) / (np.ptp(ys) + 1))

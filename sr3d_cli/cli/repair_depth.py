@@ -1,0 +1,56 @@
+"""``sr3d repair-depth SCENE``: the depth map with the transparent objects put back."""
+
+from __future__ import annotations
+
+import click
+
+from sr3d_cli.cli.options import UsageExit, common_options, load_config, scene_options
+from sr3d_cli.cli.stage_loop import run_frames, workers_option
+from sr3d_cli.errors import InputError
+
+
+@click.command("repair-depth")
+@click.argument("scene", type=click.Path(exists=True, file_okay=False))
+@click.option("--npy", is_flag=True, help="Also write repaired/<frame>.npy (float32 metres).")
+@click.option("--ply", is_flag=True, help="Also write repaired/<frame>.ply (coloured points).")
+@click.option("--preview", is_flag=True,
+              help="Also write repaired/<frame>_preview.png: RGB with outlines | raw | repaired.")
+@workers_option
+@scene_options
+@common_options
+def repair_depth(scene, npy, ply, preview, workers, out, frames, fmt):
+    """Run any missing stage (segment, reconstruct, align), then render the placed meshes into
+    the depth: writes repaired/<frame>.png in the input's encoding."""
+    from sr3d_cli.io import preview as previews
+    from sr3d_cli.io.atomic import write_bytes, write_npy, write_png
+    from sr3d_cli.io.images import write_depth
+    from sr3d_cli.pipeline import Pipeline
+    from sr3d_cli.stages import depth_suffix
+
+    cfg = load_config({"io.format": fmt})
+    pipeline = Pipeline(cfg)
+    try:  # load models once, before the batch, so a bad model file is one usage error
+        if cfg.segment.backend == "sam-onnx":
+            _ = pipeline.segmenter
+        if cfg.reconstruct.backend != "revolution":
+            _ = pipeline.reconstructor
+    except InputError as exc:
+        raise UsageExit(str(exc)) from None
+
+    def work(frame):
+        source, fid = frame.scene, frame.frame_id
+        messages = pipeline.ensure_upstream(frame)
+        depth, ids = pipeline.repaired_depth(frame)
+        scale = frame.camera.depth_scale
+        write_depth(source.output_path("repaired", fid, depth_suffix(source, fid)), depth, scale)
+        if npy:
+            write_npy(source.output_path("repaired", fid, ".npy"), depth)
+        if ply:
+            write_bytes(source.output_path("repaired", fid, ".ply"),
+                        previews.point_cloud_ply(depth, frame.rgb, frame.camera.K))
+        if preview:
+            write_png(source.output_path("repaired", fid, "_preview.png"),
+                      previews.preview_image(frame.rgb, frame.depth_m, depth, ids))
+        return messages
+
+    run_frames("repair-depth", scene, cfg, out, frames, work, workers)
