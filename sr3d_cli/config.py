@@ -99,7 +99,7 @@ class AlignConfig:
 
 @dataclass
 class RepairConfig:
-    outside_render: str = "keep"
+    outside_render: str = "nearest"
 
 
 @dataclass
@@ -150,7 +150,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "reconstruct.backend": ("revolution", "onnx", "library"),
     "reconstruct.masks": ("segment", "gt"),
     "align.mode": ("sr3d", "paper"),
-    "repair.outside_render": ("keep", "plane"),
+    "repair.outside_render": ("nearest", "keep", "plane"),
     "evaluate.holes": ("full", "ignore"),
     "evaluate.mask": ("auto", "gt", "pred"),
 }

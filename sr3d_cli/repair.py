@@ -2,13 +2,15 @@
 
 Inside an object's mask the rendered depth replaces the sensor's (the renderer's z-buffer keeps
 the nearest surface where objects overlap); elsewhere the sensor's depth is kept. Mask pixels the
-placed mesh does not cover keep the sensor's reading (``outside_render: keep``) or take the
+placed mesh does not cover take the nearest rendered depth within a few pixels
+(``outside_render: nearest``, the default), keep the sensor's reading (``keep``) or take the
 table's depth (``plane``). Objects that could not be placed are left untouched.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 from sr3d_cli.geometry.camera import Camera
 from sr3d_cli.geometry.plane import Plane
@@ -24,7 +26,7 @@ def placed_render_meshes(placed: list[tuple[int, object, np.ndarray, float]]) ->
 
 def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
                   placed_ids: list[int], *, plane: Plane | None = None, K: np.ndarray | None = None,
-                  outside_render: str = "keep") -> np.ndarray:
+                  outside_render: str = "nearest", max_gap: int = 6) -> np.ndarray:
     """Repaired depth ``(H, W) float32`` metres.
 
     raw_m : sensor depth; ids : instance ids (H, W); render_depth : depth of the placed meshes
@@ -34,14 +36,22 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
     inside = np.isin(ids, placed_ids)
     hit = inside & (render_depth > 0)
     out[hit] = render_depth[hit]
-    if outside_render == "plane" and plane is not None and K is not None:
-        miss = inside & ~hit
+    miss = inside & ~hit
+    if not miss.any() or not hit.any():
+        return out
+    if outside_render == "nearest":
+        # a mask a little larger than the placed mesh: the nearest rendered surface, within
+        # ``max_gap`` pixels; further away the sensor's reading stays
+        dist, (iy, ix) = ndimage.distance_transform_edt(~(render_depth > 0), return_indices=True)
+        near = miss & (dist <= max_gap)
+        out[near] = render_depth[iy[near], ix[near]]
+    elif outside_render == "plane" and plane is not None and K is not None:
         out[miss] = plane.depth_image(raw_m.shape, K)[miss]
     return out
 
 
 def repair_frame(raw_m: np.ndarray, ids: np.ndarray, camera: Camera, renderer: Renderer,
-                 placed: list, *, plane: Plane | None = None, outside_render: str = "keep"
+                 placed: list, *, plane: Plane | None = None, outside_render: str = "nearest"
                  ) -> np.ndarray:
     if not placed:
         return raw_m.astype(np.float32).copy()

@@ -101,6 +101,18 @@ class Aligner:
         foot = low.mean(0)
         return anchor - scale * foot
 
+    def _size_guess(self, R, anchor, plane, extent_px: float) -> float:
+        """Scale making the projected mesh as large as the mask (larger bounding-box side)."""
+        s = float(anchor[2] * extent_px / self.K[0, 0])  # metres spanned by the mask there
+        for _ in range(2):
+            t = self._rest_translation(R, s, anchor, plane)
+            uv, _ = project_mesh(self.verts, R, t, s, self.K)
+            uv = uv[np.isfinite(uv).all(1)]
+            if len(uv) == 0:
+                break
+            s *= extent_px / max(float(np.ptp(uv, axis=0).max()), 1e-6)
+        return s
+
     def _silhouette(self, R, t, scale, window: _Window) -> np.ndarray:
         uv, _ = project_mesh(self.verts, R, t, scale, self.K)
         return fill_silhouette(uv, self.faces, window.shape, window.origin, window.zoom)
@@ -225,13 +237,17 @@ class Aligner:
             inter = np.minimum(obs, ren).sum()
             return 1.0 - inter / max(np.maximum(obs, ren).sum(), 1e-9)
 
-        x0 = np.zeros(4 if yaw_free else 3)
-        step = np.array([0.003, 0.003, 0.03, np.radians(4)])[:len(x0)]
-        simplex = np.vstack([x0] + [x0 + np.eye(len(x0))[i] * step[i] for i in range(len(x0))])
-        res = minimize(cost, x0, method="Nelder-Mead",
-                       options={"initial_simplex": simplex, "maxfev": self.cfg.refine_evals,
-                                "xatol": 1e-4, "fatol": 1e-4})
-        return pose(res.x)
+        x = np.zeros(4 if yaw_free else 3)
+        step = np.array([0.004, 0.004, 0.05, np.radians(5)])[:len(x)]
+        for _ in range(2):  # a restart with a fresh simplex escapes early collapse
+            simplex = np.vstack([x] + [x + np.eye(len(x))[i] * step[i] for i in range(len(x))])
+            res = minimize(cost, x, method="Nelder-Mead",
+                           options={"initial_simplex": simplex,
+                                    "maxfev": self.cfg.refine_evals // 2,
+                                    "xatol": 1e-4, "fatol": 1e-5})
+            x = res.x
+            step = step / 3
+        return pose(x)
 
     # ---- the whole placement ----------------------------------------------------------------
     def __call__(self, mesh: trimesh.Trimesh, mask: np.ndarray, K: np.ndarray,
@@ -268,6 +284,7 @@ class Aligner:
         symmetric = is_axisymmetric(mesh)
         plain = cfg.mode == "paper"
         searched = {"candidates": 0}
+        extent_px = float(max(np.ptp(xs), np.ptp(ys)) + 1)
 
         def searched_candidates():
             """View matching over the candidate orientations: the best view of each resting
@@ -280,10 +297,7 @@ class Aligner:
             searched["candidates"] = len(rotations)
             scored = []
             for i, (group, R) in enumerate(rotations):
-                # size guess: the mesh at unit scale, compared by area
-                t1 = self._rest_translation(R, 1.0, anchor, plane)
-                area1 = self._silhouette(R, t1, 1.0, window).sum() / window.zoom ** 2
-                s0 = float(np.sqrt(mask.sum() / area1)) if area1 > 0 else 0.1
+                s0 = self._size_guess(R, anchor, plane, extent_px)
                 t0 = self._rest_translation(R, s0, anchor, plane)
                 view, _ = matcher.render_and_score(self.verts, self.faces, R, t0, s0, K,
                                                    window.spec)

@@ -23,17 +23,35 @@ def project_mesh(vertices_obj: np.ndarray, R: np.ndarray, t: np.ndarray, scale: 
     return uv, pts
 
 
+def window_K(K: np.ndarray, origin: tuple[float, float], zoom: float) -> np.ndarray:
+    """Intrinsics of a window whose top-left pixel is ``origin``, magnified by ``zoom``."""
+    Kw = np.asarray(K, dtype=np.float64).copy()
+    Kw[0, 0] *= zoom
+    Kw[1, 1] *= zoom
+    Kw[0, 2] = (K[0, 2] - origin[0]) * zoom
+    Kw[1, 2] = (K[1, 2] - origin[1]) * zoom
+    return Kw
+
+
 def fill_silhouette(uv: np.ndarray, faces: np.ndarray, shape: tuple[int, int],
                     origin: tuple[float, float] = (0.0, 0.0), zoom: float = 1.0) -> np.ndarray:
     """Silhouette ``shape bool`` of triangles ``faces (m, 3)`` over pixels ``uv (n, 2)``,
-    drawn in a window whose top-left pixel is ``origin``, magnified by ``zoom``."""
+    drawn in a window whose top-left pixel is ``origin``, magnified by ``zoom``.
+
+    Triangles are filled one by one: a single ``cv2.fillPoly`` call treats overlapping
+    polygons as holes (even-odd rule). Back-facing triangles are skipped (closed meshes)."""
     pix = (uv - np.asarray(origin)) * zoom
     tri = pix[faces]
     tri = tri[np.isfinite(tri).all(axis=(1, 2))]
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    # counter-clockwise from outside; the image's y axis points down, so front faces have
+    # a positive cross product here
+    tri = tri[(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0]
     limit = 4.0 * max(shape)  # far-off vertices only slow the filling down
     tris = np.rint(np.clip(tri, -limit, limit) * 4).astype(np.int32)  # 2 sub-pixel bits
     out = np.zeros(shape, np.uint8)
-    cv2.fillPoly(out, list(tris), 1, lineType=cv2.LINE_8, shift=2)
+    for t in tris:
+        cv2.fillConvexPoly(out, t, 1, lineType=cv2.LINE_8, shift=2)
     return out > 0
 
 
