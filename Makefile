@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: install demo test sample-data clean
+.PHONY: install demo test bench sample-data clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -14,11 +14,11 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-# The main job on the bundled sample data (later stages extend this).
+# The main job on the bundled sample data: repair the depth, then score raw vs repaired.
 demo: install
-	$(BIN)/sr3d synth build/demo/synth --scenes 2 --seed 1 --overwrite
-	$(BIN)/sr3d evaluate sample_data --pred depth --out build/demo/sample_data --plot
-	$(BIN)/sr3d evaluate build/demo/synth --pred depth
+	rm -rf build/demo
+	$(BIN)/sr3d repair-depth sample_data --out build/demo/sample_data --preview
+	$(BIN)/sr3d evaluate sample_data --pred depth --pred repaired --out build/demo/sample_data --plot
 
 test: install
 	$(BIN)/python -m pytest -q tests
@@ -28,6 +28,9 @@ sample-data: install
 	rm -rf build/sample_data
 	$(BIN)/sr3d synth build/sample_data --scenes 4 --seed 0
 	rm -rf sample_data && mv build/sample_data sample_data
+
+bench: install
+	$(BIN)/python bench/run.py
 
 clean:
 	rm -rf build $(VENV) .pytest_cache

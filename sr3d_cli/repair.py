@@ -63,7 +63,9 @@ def repair_frame(raw_m: np.ndarray, ids: np.ndarray, camera: Camera, renderer: R
 def plane_fill(raw_m: np.ndarray, mask: np.ndarray, plane: Plane, K: np.ndarray) -> np.ndarray:
     """Baseline: the table's depth inside the object masks."""
     out = raw_m.astype(np.float32).copy()
-    out[mask] = plane.depth_image(raw_m.shape, K)[mask]
+    table = plane.depth_image(raw_m.shape, K)
+    fill = mask & (table > 0)  # rays above the horizon never meet the table: keep the sensor
+    out[fill] = table[fill]
     return out
 
 
@@ -72,7 +74,9 @@ def inpaint_fill(raw_m: np.ndarray, mask: np.ndarray, radius: int = 5) -> np.nda
     import cv2
 
     holes = (mask | (raw_m <= 0)).astype(np.uint8)
-    filled = cv2.inpaint(raw_m.astype(np.float32), holes, radius, cv2.INPAINT_TELEA)
+    # cv2.inpaint on float32 loses precision on values near 1: work in millimetres
+    filled = cv2.inpaint(raw_m.astype(np.float32) * 1000, holes, radius,
+                         cv2.INPAINT_TELEA) / 1000
     out = raw_m.astype(np.float32).copy()
     out[mask] = filled[mask]
     return out

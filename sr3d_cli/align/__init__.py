@@ -332,7 +332,7 @@ class Aligner:
         for batch in (hinted, searched_candidates):
             if best is not None and best[1] >= cfg.hint_accept:
                 break  # the reconstruction's own pose explains the mask: no search needed
-            for total, prior, group, i, R, s0, t0, view in batch():
+            for _total, prior, group, i, R, s0, t0, view in batch():
                 if group == "hint":
                     diag = {"seed": "reconstruction pose"}
                     R, t, scale = refine(R, t0, s0)
