@@ -25,7 +25,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from sr3d_cli.align.silhouette import aspect, crop_square, fill_silhouette, project_mesh
-from sr3d_cli.geometry.transforms import rotation_about
+from sr3d_cli.geometry.transforms import rotation_about, rotation_between
 
 
 @dataclass
@@ -34,18 +34,6 @@ class ViewScore:
     ssim: float
     edges: float
     aspect: float
-
-
-def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
-    axis = np.cross(a, b)
-    s, c = np.linalg.norm(axis), float(a @ b)
-    if s < 1e-9:
-        if c > 0:
-            return np.eye(3)
-        perp = np.cross(a, [1.0, 0, 0]) if abs(a[0]) < 0.9 else np.cross(a, [0, 1.0, 0])
-        return rotation_about(perp, np.pi)
-    return rotation_about(axis, np.arctan2(s, c))
 
 
 def is_axisymmetric(mesh: trimesh.Trimesh, tol: float = 0.01) -> bool:
@@ -98,7 +86,7 @@ def candidates_plane(mesh: trimesh.Trimesh, up_cam: np.ndarray, symmetric: bool,
     the mesh onto the table, turned about the table normal."""
     out = []
     for g, d in enumerate(resting_directions(mesh, symmetric, max_rests)):
-        R_rest = _rotation_between(d, -up_cam)  # this object direction points down
+        R_rest = rotation_between(d, -up_cam)  # this object direction points down
         upright = symmetric and abs(d[2]) > 0.999  # standing on its base (or top)
         steps = 1 if upright else yaw_steps
         for k in range(steps):
@@ -111,7 +99,7 @@ def candidates_sphere(view_count: int, roll_steps: int, towards_camera: np.ndarr
     """Rotations seeing the object from every icosphere viewpoint, times in-plane rolls."""
     out = []
     for v in icosphere_directions(view_count):
-        R_view = _rotation_between(v, towards_camera)  # object's v looks at the camera
+        R_view = rotation_between(v, towards_camera)  # object's v looks at the camera
         for k in range(roll_steps):
             out.append((len(out), rotation_about(towards_camera, 2 * np.pi * k / roll_steps)
                         @ R_view))

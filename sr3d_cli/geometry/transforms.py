@@ -51,3 +51,17 @@ def is_rigid(T: np.ndarray, tol: float = 1e-6) -> bool:
     R = T[:3, :3]
     return (np.allclose(R @ R.T, np.eye(3), atol=tol) and abs(np.linalg.det(R) - 1) < tol
             and np.allclose(T[3], [0, 0, 0, 1], atol=tol))
+
+
+def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Smallest rotation taking direction ``a`` to direction ``b``."""
+    a = a / np.linalg.norm(a)
+    b = b / np.linalg.norm(b)
+    axis = np.cross(a, b)
+    s, c = np.linalg.norm(axis), float(np.dot(a, b))
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        perp = np.cross(a, [1.0, 0, 0]) if abs(a[0]) < 0.9 else np.cross(a, [0, 1.0, 0])
+        return rotation_about(perp, np.pi)
+    return rotation_about(axis, np.arctan2(s, c))

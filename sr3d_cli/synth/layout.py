@@ -9,7 +9,8 @@ import trimesh
 from scipy.spatial import ConvexHull
 
 from sr3d_cli.geometry.camera import Camera, project
-from sr3d_cli.geometry.transforms import apply_T, look_at, make_T, rotation_about
+from sr3d_cli.geometry.transforms import (apply_T, look_at, make_T, rotation_about,
+                                          rotation_between)
 from sr3d_cli.synth.shapes import KINDS, make_glassware
 
 
@@ -40,20 +41,6 @@ class Layout:
     objects: list[Placed]
     camera: Camera
     T_world_cams: list[np.ndarray] = field(default_factory=list)
-
-
-def rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Smallest rotation taking direction ``a`` to direction ``b``."""
-    a = a / np.linalg.norm(a)
-    b = b / np.linalg.norm(b)
-    axis = np.cross(a, b)
-    s, c = np.linalg.norm(axis), float(np.dot(a, b))
-    if s < 1e-12:
-        if c > 0:
-            return np.eye(3)
-        perp = np.cross(a, [1.0, 0, 0]) if abs(a[0]) < 0.9 else np.cross(a, [0, 1.0, 0])
-        return rotation_about(perp, np.pi)
-    return rotation_about(axis, np.arctan2(s, c))
 
 
 def lying_rotation(profile: np.ndarray) -> np.ndarray:
