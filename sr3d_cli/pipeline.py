@@ -82,8 +82,7 @@ class Pipeline:
         ids, _ = stages.load_instances(source, fid, frame.depth_m.shape)
         placed = []
         for obj in stages.load_poses(source, fid):
-            mesh = stages.load_mesh(source.stage_file(f"meshes/{fid}", str(obj["id"]), (".ply",))
-                                    or stages.mesh_path(source, fid, obj["id"]))
+            mesh = stages.load_mesh(stages.find_mesh(source, fid, obj["id"]))
             placed.append((int(obj["id"]), mesh, np.asarray(obj["T_cam_obj"], dtype=np.float64),
                            float(obj["scale"])))
         plane = None

@@ -71,6 +71,13 @@ def mesh_path(source: SceneSource, frame_id: str, obj_id: int, suffix: str = ".p
     return source.out / "meshes" / frame_id / f"{obj_id}{suffix}"
 
 
+def find_mesh(source: SceneSource, frame_id: str, obj_id: int):
+    """The mesh of an object: under the output root, else under the input root (else the
+    output path, which does not exist)."""
+    hit = source.stage_file(f"meshes/{frame_id}", str(obj_id), (".ply", ".obj", ".stl"))
+    return hit if hit is not None else mesh_path(source, frame_id, obj_id)
+
+
 def write_mesh(path, mesh: trimesh.Trimesh) -> None:
     write_bytes(path, mesh.export(file_type="ply", encoding="binary"))
 
@@ -81,7 +88,7 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
     source, fid = frame.scene, frame.frame_id
     ids, records = load_instances(source, fid, frame.depth_m.shape, which_masks)
     plane, why = frame_plane(frame, ids, plane_cfg)
-    written, messages, summary = 0, [], {}
+    written, messages = 0, []
     for k, record in sorted(records.items()):
         try:
             if plane is None and reconstructor.cfg.backend != "onnx":
@@ -90,11 +97,9 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
                                    record.get("label", ""))
         except ValueError as exc:  # ObjectError, and model/fit failures of this object
             messages.append(f"object {k}: {exc}")
-            summary[str(k)] = {"error": str(exc)}
             continue
         write_mesh(mesh_path(source, fid, k), result.mesh)
         write_json(mesh_path(source, fid, k, ".json"), result.meta)
-        summary[str(k)] = {"mesh": f"meshes/{fid}/{k}.ply", **result.meta}
         written += 1
     return written, messages
 
@@ -124,10 +129,7 @@ def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
     plane, why = frame_plane(frame, ids, plane_cfg)
     objects, messages = [], []
     for k in sorted(records):
-        path = mesh_path(source, fid, k)
-        if not path.is_file():
-            hit = source.stage_file(f"meshes/{fid}", str(k), (".ply", ".obj", ".stl"))
-            path = hit if hit is not None else path
+        path = find_mesh(source, fid, k)
         try:
             if not path.is_file():
                 raise ValueError("no mesh: run `sr3d reconstruct` first")

@@ -92,14 +92,18 @@ class Aligner:
         self.cfg = cfg
 
     # ---- shared pieces -------------------------------------------------------------------------
+    def _footprint(self, R, normal) -> tuple[np.ndarray, float]:
+        """Centre of the rotated unit mesh's contact region (points within 0.02 of its lowest
+        point along ``normal``) and that lowest height."""
+        pts = self.verts @ R.T
+        heights = pts @ normal
+        low = heights.min()
+        return pts[heights <= low + 0.02].mean(0), float(low)
+
     def _rest_translation(self, R, scale, anchor, plane):
         """t such that the lowest point of the rotated mesh touches the plane under ``anchor``
         (a plane point), with the mesh's footprint centred there."""
-        pts = self.verts @ R.T
-        heights = pts @ plane.normal
-        low = pts[heights <= heights.min() + 0.02]
-        foot = low.mean(0)
-        return anchor - scale * foot
+        return anchor - scale * self._footprint(R, plane.normal)[0]
 
     def _size_guess(self, R, anchor, plane, extent_px: float) -> float:
         """Scale making the projected mesh as large as the mask (larger bounding-box side)."""
@@ -215,9 +219,7 @@ class Aligner:
         e1 = _unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < 0.9 else np.cross(n, [0, 1.0, 0]))
         e2 = np.cross(n, e1)
         obs = _soft(window.obs)
-        pts0 = self.verts @ R.T
-        m0 = (pts0 @ n).min()
-        pivot = t + scale * pts0[(pts0 @ n) <= m0 + 0.02].mean(0)  # contact centre
+        pivot = t + scale * self._footprint(R, n)[0]  # contact centre
 
         def pose(x):
             dx, dy, ls, yaw = x[0], x[1], x[2], x[3] if yaw_free else 0.0
@@ -225,10 +227,9 @@ class Aligner:
             R1 = Ry @ R
             s1 = scale * np.exp(ls)
             p1 = pivot + dx * e1 + dy * e2
-            pts = self.verts @ R1.T
-            foot = pts[(pts @ n) <= (pts @ n).min() + 0.02].mean(0)
+            foot, low = self._footprint(R1, n)
             t1 = p1 - s1 * foot
-            t1 = t1 - (n @ t1 + s1 * (pts @ n).min() + plane.offset) * n  # rest on the plane
+            t1 = t1 - (n @ t1 + s1 * low + plane.offset) * n  # rest on the plane
             return R1, t1, s1
 
         def cost(x):

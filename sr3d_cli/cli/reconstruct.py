@@ -34,7 +34,7 @@ def reconstruct(scene, backend, masks, library, out, frames, fmt):
         raise UsageExit(str(exc)) from None
 
     def work(frame):
-        written, messages = reconstruct_frame(frame, reconstructor, cfg.plane,
+        _, messages = reconstruct_frame(frame, reconstructor, cfg.plane,
                                               cfg.reconstruct.masks)
         return messages
 

@@ -94,11 +94,17 @@ class _Frame:
         return uv @ self.M[:, :2].T + self.M[:, 2]
 
 
-def _extent(mask: np.ndarray) -> tuple[float, float, float, float]:
-    """(top row, bottom row, mean centre column) of a rotated mask, and its area."""
+def _extent(mask: np.ndarray) -> tuple[float, float, float]:
+    """(top row, bottom row, mean column) of a rotated mask."""
     rows = np.nonzero(mask.any(1))[0]
     cols = np.nonzero(mask)[1]
-    return float(rows[0]), float(rows[-1]), float(cols.mean()), float(mask.sum())
+    return float(rows[0]), float(rows[-1]), float(cols.mean())
+
+
+def _metres(gap_px: float, moved_px: float, eps: float) -> float:
+    """Metres to move a parameter so that a feature that moved ``moved_px`` pixels for ``eps``
+    metres closes a ``gap_px`` pixel gap (0 when the parameter does not move it)."""
+    return gap_px / (moved_px / eps) if abs(moved_px) > 1e-9 else 0.0
 
 
 def _orientation(mask: np.ndarray) -> float:
@@ -135,8 +141,8 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         ratio = (_widths(frame.obs, rows) + 0.5) / (_widths(ren, rows) + 0.5)
         model.radii = np.clip(model.radii * np.clip(ratio, 0.7, 1.4) ** 0.8,
                               0.002 * model.height, None)
-        t_obs, b_obs, x_obs, _ = _extent(frame.obs)
-        t_ren, b_ren, x_ren, _ = _extent(ren)
+        t_obs, b_obs, x_obs = _extent(frame.obs)
+        t_ren, b_ren, x_ren = _extent(ren)
         eps = 0.005
         # pixels moved in the window per metre of each parameter (finite differences)
         def shift(delta_base=np.zeros(3), delta_top=np.zeros(3)):
@@ -150,13 +156,11 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             side = np.cross(n, away)
             # top: the height; bottom: the base moves towards / away from the camera
             _, bt = shift(delta_top=eps * model.axis)
-            dh = (t_obs - t_ren) / ((bt[1] - b0[1]) / eps) if abs(bt[1] - b0[1]) > 1e-9 else 0
+            dh = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
             a_away, _ = shift(delta_base=eps * away)
-            db = (b_obs - b_ren) / ((a_away[1] - a0[1]) / eps) if abs(a_away[1] - a0[1]) > 1e-9 \
-                else 0
+            db = _metres(b_obs - b_ren, a_away[1] - a0[1], eps)
             a_side, _ = shift(delta_base=eps * side)
-            ds = (x_obs - x_ren) / ((a_side[0] - a0[0]) / eps) if abs(a_side[0] - a0[0]) > 1e-9 \
-                else 0
+            ds = _metres(x_obs - x_ren, a_side[0] - a0[0], eps)
             step = np.clip(0.8 * np.array([dh, db, ds]), -0.5 * model.height, 0.5 * model.height)
             model.base = model.base + step[1] * away + step[2] * side
             model.height = max(model.height + step[0], 1e-3)
@@ -164,12 +168,11 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             # lying: move each end along the axis, the axis sideways in the plane
             side = _unit(np.cross(n, model.axis))
             _, bt = shift(delta_top=eps * model.axis)
-            dt = (t_obs - t_ren) / ((bt[1] - b0[1]) / eps) if abs(bt[1] - b0[1]) > 1e-9 else 0
+            dt = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
             a_b, _ = shift(delta_base=-eps * model.axis)
-            db = (b_obs - b_ren) / ((a_b[1] - a0[1]) / eps) if abs(a_b[1] - a0[1]) > 1e-9 else 0
+            db = _metres(b_obs - b_ren, a_b[1] - a0[1], eps)
             a_side, _ = shift(delta_base=eps * side)
-            ds = (x_obs - x_ren) / ((a_side[0] - a0[0]) / eps) if abs(a_side[0] - a0[0]) > 1e-9 \
-                else 0
+            ds = _metres(x_obs - x_ren, a_side[0] - a0[0], eps)
             step = np.clip(0.8 * np.array([dt, db, ds]), -0.5 * model.height, 0.5 * model.height)
             model.base = model.base - step[1] * model.axis + step[2] * side
             model.height = max(model.height + step[0] + step[1], 1e-3)
