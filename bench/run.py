@@ -8,6 +8,7 @@ the given masks imported (skipped with a reason when absent).
 from __future__ import annotations
 
 import json
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -103,7 +104,43 @@ def pose_errors(source, fid, aligner, plane_cfg) -> list[dict]:
     return rows
 
 
-def main(frames: int = 24) -> None:
+def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
+    """Grasps planned on the repaired scene (from the sr3d depth run's stage outputs) and on the
+    raw depth with the same masks, judged against the true meshes; grasp stage time."""
+    import shutil
+
+    from sr3d_cli.grasp.planner import Planner
+    from sr3d_cli.grasp.quality import overall
+    from sr3d_cli.io.images import write_depth
+
+    planner = Planner(cfg.grasp)
+    frames = {"repaired": [], "raw": []}
+    seconds = []
+    for source in discover_scenes(synth, IOConfig(), None):
+        fid = "000000"
+        staged = type(source)(source.root, out=work / "synthetic" / "sr3d" / source.name,
+                              name=source.name, io=source.io)
+        frame = staged.load_frame(fid)
+        depth, _ = Pipeline(cfg).repaired_depth(frame)
+        write_depth(staged.output_path("repaired", fid), depth, frame.camera.depth_scale)
+        raw = type(source)(source.root, out=work / "grasp_raw" / source.name, name=source.name,
+                           io=source.io)
+        (raw.out / "masks").mkdir(parents=True, exist_ok=True)
+        shutil.copy(staged.stage_file("masks", fid, (".png",)), raw.out / "masks" / f"{fid}.png")
+        for name, scene in (("repaired", staged), ("raw", raw)):
+            t = time.perf_counter()
+            stages.grasp_frame(scene.load_frame(fid), planner, cfg.plane, name)
+            if name == "repaired":
+                seconds.append(time.perf_counter() - t)
+            frames[name].append(stages.evaluate_grasp_frame(scene, fid, cfg))
+        print("grasp", source.name, " ".join(
+            f"{k}: top1 {v[-1]['top1_success']:.2f} top10 {v[-1]['top10_success']:.2f}"
+            for k, v in frames.items()), file=sys.stderr)
+    return {"friction": cfg.grasp.friction, "median_seconds": float(np.median(seconds)),
+            **{k: overall(v) for k, v in frames.items()}}
+
+
+def main(frames: int = 24, sections: tuple[str, ...] = ("depth", "poses", "grasp")) -> None:
     work = ROOT / "work"
     synth = work / "synth700"
     cfg = SynthConfig(seed=700, views=1)
@@ -115,9 +152,15 @@ def main(frames: int = 24) -> None:
     paper = Config()
     paper.align.mode = "paper"
     paper.align.rolls = 4  # 162 viewpoints x 4 rolls: 12 rolls triples a run already ~10 min
-    results = {"synthetic": {}, "real": {}, "poses": {}, "timings": {}}
+    previous = ROOT / "results.json"
+    results = json.loads(previous.read_text()) if previous.is_file() else {}
+    for key in ("synthetic", "real", "poses", "timings", "grasp"):
+        results.setdefault(key, {})
     methods = ("raw", "plane-fill", "inpaint", "paper", "sr3d")
     for label, root, masks in (("synthetic", synth, "segment"), ("real", REAL, "import")):
+        if "depth" not in sections:
+            break
+        shutil.rmtree(work / label, ignore_errors=True)  # stage outputs: time every stage
         if not root.is_dir():
             results[label] = {"skipped": f"{root} not present"}
             continue
@@ -141,7 +184,7 @@ def main(frames: int = 24) -> None:
                    for k in ("segment", "reconstruct", "align", "render", "total")
                    if any(k in t for t in ts)}
             for name, ts in timings.items()}
-    for mode in ("sr3d", "paper"):
+    for mode in ("sr3d", "paper") if "poses" in sections else ():
         c = Config().align if mode == "sr3d" else paper.align
         aligner = Aligner(c)
         rows = []
@@ -152,6 +195,8 @@ def main(frames: int = 24) -> None:
             "objects": len(rows), "failed": len(rows) - len(ok),
             **{f"median_{k}": float(np.median([r[k] for r in ok]))
                for k in ("rotation_deg", "translation_mm", "scale_pct", "seconds")}}
+    if "grasp" in sections:
+        results["grasp"] = grasp_bench(synth, work, default)
     (ROOT / "results.json").write_text(json.dumps(results, indent=1, sort_keys=True,
                                                   default=float))
     write_report(results, methods)
@@ -192,6 +237,21 @@ def write_report(results: dict, methods) -> None:
                      f"| {p['median_translation_mm']:.1f} | {p['median_scale_pct']:.2f} | "
                      f"{p['median_seconds']:.2f} |")
     lines += ["", "Rotation error of axially symmetric objects is the axis angle. Medians.", ""]
+    grasp = results.get("grasp", {})
+    if grasp:
+        lines += ["## grasps (synthetic, sr3d's masks; judged on the true meshes)", "",
+                  f"Friction {grasp['friction']}: jaws closed on the true meshes, force closure, "
+                  "collisions with the true scene and table. Top-1: the best grasp of each true "
+                  "object (no grasp counts as a failure). Top-10: mean over frames of the 10 best "
+                  "grasps' success.", "",
+                  "| planned on | objects | with grasps | top-1 success | top-10 success |",
+                  "|---|---|---|---|---|"]
+        for name in ("repaired", "raw"):
+            g = grasp[name]
+            lines.append(f"| {name} | {g['objects']} | {g['objects_with_grasps']} | "
+                         f"{g['top1_success']:.3f} | {g['top10_success']:.3f} |")
+        lines += ["", f"- grasp stage, median seconds per frame: {grasp['median_seconds']:.3f}",
+                  ""]
     (ROOT / "RESULTS.md").write_text("\n".join(lines))
 
 
@@ -217,4 +277,5 @@ def plot(results: dict, methods) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    # sections to run (default all): depth poses grasp; results of the others are kept
+    main(sections=tuple(sys.argv[1:]) or ("depth", "poses", "grasp"))

@@ -103,6 +103,36 @@ class RepairConfig:
 
 
 @dataclass
+class GraspConfig:
+    source: str = "repaired"
+    max_width: float = 0.08
+    finger_length: float = 0.05
+    finger_thickness: float = 0.01
+    finger_height: float = 0.02
+    palm_width: float = 0.2
+    palm_height: float = 0.06
+    palm_depth: float = 0.06
+    base_to_tip: float = 0.1034
+    depths: list[float] = field(default_factory=lambda: [0.01, 0.02, 0.03, 0.04])
+    friction: float = 0.5
+    width_margin: float = 0.005
+    clearance: float = 0.003
+    seeds: int = 64
+    approaches: int = 7
+    pair_radius: float = 0.004
+    contact_band: float = 0.002
+    collision_points: int = 3
+    mesh_points: int = 3000
+    stride: int = 3
+    nms_distance: float = 0.03
+    nms_angle: float = 30.0
+    top_k: int = 10
+    friction_weight: float = 0.6
+    width_weight: float = 0.2
+    approach_weight: float = 0.2
+
+
+@dataclass
 class SynthConfig:
     scenes: int = 4
     views: int = 1
@@ -139,6 +169,7 @@ class Config:
     reconstruct: ReconstructConfig = field(default_factory=ReconstructConfig)
     align: AlignConfig = field(default_factory=AlignConfig)
     repair: RepairConfig = field(default_factory=RepairConfig)
+    grasp: GraspConfig = field(default_factory=GraspConfig)
     synth: SynthConfig = field(default_factory=SynthConfig)
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
 
@@ -151,6 +182,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "reconstruct.masks": ("segment", "gt"),
     "align.mode": ("sr3d", "paper"),
     "repair.outside_render": ("nearest", "keep", "plane"),
+    "grasp.source": ("repaired", "raw"),
     "evaluate.holes": ("full", "ignore"),
     "evaluate.mask": ("auto", "gt", "pred"),
 }

@@ -15,7 +15,8 @@ import trimesh
 
 from sr3d_cli.errors import InputError
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.io.atomic import write_bytes, write_json, write_png
+from sr3d_cli.geometry.transforms import place_points
+from sr3d_cli.io.atomic import write_bytes, write_json, write_npy, write_png
 from sr3d_cli.io.scene import Frame, SceneSource
 
 log = logging.getLogger("sr3d")
@@ -165,3 +166,112 @@ def depth_suffix(source: SceneSource, frame_id: str) -> str:
     """Repaired depth keeps the input's encoding (PNG with depth_scale, EXR or npy metres)."""
     suffix = source.depth_path(frame_id).suffix.lower()
     return suffix if suffix in (".png", ".exr", ".npy") else ".png"
+
+
+def _read_prediction(source: SceneSource, stage: str, frame_id: str, shape) -> np.ndarray:
+    path = source.prediction_path(stage, frame_id)
+    if path is None:
+        raise ValueError(f"no {stage} depth: run `sr3d repair-depth` first")
+    return source.read_depth_checked(path, shape)
+
+
+def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired",
+                only: int | None = None, hand_poses: float | None = None
+                ) -> tuple[int, list[str]]:
+    """Plan grasps for one frame; writes ``grasps/<id>.json`` and ``.npy`` (an empty but valid
+    file, with the reason, when nothing can be planned). Returns (grasps, messages)."""
+    from sr3d_cli.grasp import GraspSet
+    from sr3d_cli.grasp.planner import Cloud, depth_cloud, mesh_cloud
+
+    source, fid, K = frame.scene, frame.frame_id, frame.camera.K
+    cfg = planner.cfg
+    grasps, messages = GraspSet.empty(), []
+    try:
+        ids, _ = load_instances(source, fid, frame.depth_m.shape)
+        if only is not None and not (ids == only).any():
+            raise ValueError(f"object {only} is not in masks/{fid}")
+        if not (ids > 0).any():
+            raise ValueError("no objects in masks/")
+        depth = frame.depth_m if depth_source == "raw" else \
+            _read_prediction(source, "repaired", fid, frame.depth_m.shape)
+        plane, why = frame_plane(frame, ids, plane_cfg)
+        if plane is None:
+            raise ValueError(why)
+        scene = depth_cloud(depth, K, ids, cfg.stride)
+        targets = {int(k): scene.select(scene.labels == k) for k in np.unique(ids) if k > 0}
+        if depth_source == "repaired":
+            placed = []
+            for obj in load_poses(source, fid):
+                k = int(obj["id"])
+                mesh = load_mesh(find_mesh(source, fid, k))
+                targets[k] = mesh_cloud(mesh, np.asarray(obj["T_cam_obj"]), float(obj["scale"]),
+                                        k, cfg.mesh_points, seed=k)
+                placed.append(targets[k])
+            scene = Cloud.concat([scene] + placed)
+        if only is not None:
+            targets = {only: targets[only]}
+        grasps, messages = planner.plan(scene, targets, plane)
+    except (InputError, ValueError) as exc:
+        messages.append(str(exc))
+    document = {"source": depth_source, "grasps": grasps.to_json(), "failed": messages,
+                "frame": "camera (OpenCV), metres; grasp x = approach, y = closing direction, "
+                         "position = grasp centre; fingertips reach `depth` past it"}
+    write_json(source.output_path("grasps", fid, ".json"), document)
+    write_npy(source.output_path("grasps", fid, ".npy"), grasps.to_array())
+    if hand_poses is not None:
+        write_npy(source.output_path("grasps", fid, "_hand_poses.npy"),
+                  grasps.hand_poses(hand_poses))
+    return len(grasps), messages
+
+
+def load_grasps(source: SceneSource, frame_id: str):
+    from sr3d_cli.grasp import GraspSet
+
+    path = source.stage_file("grasps", frame_id, (".npy",))
+    if path is None:
+        raise InputError(source.out / "grasps" / f"{frame_id}.npy",
+                         "no grasps: run `sr3d grasp` first")
+    try:
+        return GraspSet.from_array(np.load(path, allow_pickle=False))
+    except (OSError, ValueError) as exc:
+        raise InputError(path, f"cannot read grasps ({exc})") from None
+
+
+def grasp_truth(source: SceneSource, frame_id: str, plane_cfg):
+    """The true scene of a frame for grasp evaluation: ground-truth meshes at their poses, the
+    ground-truth depth as points, the table fitted on the ground-truth depth."""
+    import trimesh
+
+    from sr3d_cli.geometry.camera import depth_to_points
+    from sr3d_cli.grasp.quality import TrueScene
+    from sr3d_cli.segment import support_plane
+
+    gt = source.load_gt_objects(frame_id)
+    if not gt or not gt.get("objects"):
+        raise InputError(source.root / "gt" / "objects" / f"{frame_id}.json",
+                         "grasp evaluation needs ground-truth meshes and poses (gt/objects/)")
+    frame = source.load_frame(frame_id)
+    rgb_shape, camera = frame.depth_m.shape, frame.camera
+    depth = source.load_gt_depth(frame_id, rgb_shape)
+    if depth is None:
+        raise InputError(source.root / "gt" / "depth", f"no ground-truth depth for {frame_id}")
+    ids = source.load_mask(source.gt_mask_path(frame_id), rgb_shape)
+    plane = support_plane(depth, camera.K, plane_cfg, exclude=None if ids is None else ids > 0)
+    objects = []
+    for obj in gt["objects"]:
+        mesh = load_mesh(source.root / obj["mesh"])
+        verts = place_points(mesh.vertices, np.asarray(obj["T_cam_obj"]), float(obj["scale"]))
+        objects.append((int(obj["id"]), trimesh.Trimesh(verts, mesh.faces, process=False)))
+    pts = depth_to_points(depth, camera.K)[::2, ::2]
+    return TrueScene.build(objects, pts[pts[..., 2] > 0], plane)
+
+
+def evaluate_grasp_frame(source: SceneSource, frame_id: str, cfg) -> dict:
+    """Grasps of a frame judged against its ground truth (see :mod:`sr3d_cli.grasp.quality`)."""
+    from sr3d_cli.grasp.gripper import Gripper
+    from sr3d_cli.grasp.quality import judge, summarise
+
+    grasps = load_grasps(source, frame_id)
+    truth = grasp_truth(source, frame_id, cfg.plane)
+    records = judge(grasps, truth, Gripper.from_config(cfg.grasp))
+    return summarise(grasps, records, truth.ids, cfg.grasp.friction)

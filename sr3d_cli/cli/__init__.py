@@ -7,6 +7,7 @@ import click
 from sr3d_cli import __version__
 from sr3d_cli.cli.align import align
 from sr3d_cli.cli.evaluate import evaluate
+from sr3d_cli.cli.grasp import grasp
 from sr3d_cli.cli.reconstruct import reconstruct
 from sr3d_cli.cli.repair_depth import repair_depth
 from sr3d_cli.cli.segment import segment
@@ -28,6 +29,7 @@ cli.add_command(segment)
 cli.add_command(reconstruct)
 cli.add_command(align)
 cli.add_command(repair_depth)
+cli.add_command(grasp)
 cli.add_command(evaluate)
 
 

@@ -72,13 +72,19 @@ def _csv(frames: dict[str, dict], means: dict[str, dict]) -> str:
 @click.option("--mask", "mask_source", type=click.Choice(["auto", "gt", "pred"]), default=None,
               help="Pixels to score: gt masks, masks/ from segment, or auto (gt, else masks/).")
 @click.option("--plot", is_flag=True, default=None, help="Write per-frame error maps (PNG).")
+@click.option("--grasps", "grasps", is_flag=True,
+              help="Score grasps/ instead of depth: jaws closed on the true meshes, force "
+                   "closure at grasp.friction; writes grasp_metrics.json.")
 @scene_options
 @common_options
-def evaluate(scene, preds, only_valid, mask_source, plot, out, frames, fmt):
+def evaluate(scene, preds, only_valid, mask_source, plot, grasps, out, frames, fmt):
     """Score depth predictions against ground truth over the transparent objects.
 
     Writes metrics.json and metrics.csv (to --out, else SCENE) and prints the mean table.
+    With --grasps, scores grasps instead (needs gt/objects: true meshes and poses).
     """
+    if grasps:
+        return _evaluate_grasps(scene, out, frames, fmt)
     from sr3d_cli import evaluate as core
     from sr3d_cli.io.atomic import write_json, write_png, write_text
 
@@ -133,4 +139,43 @@ def evaluate(scene, preds, only_valid, mask_source, plot, out, frames, fmt):
                         "use --out DIR") from None
     click.echo(f"# {core.HOLES_NOTE[ev.holes]}")
     click.echo(format_table(means))
+    report.finish("frames")
+
+
+def _evaluate_grasps(scene, out, frames, fmt):
+    from sr3d_cli.grasp.quality import overall
+    from sr3d_cli.io.atomic import write_json
+    from sr3d_cli.stages import evaluate_grasp_frame
+
+    cfg = load_config({"io.format": fmt})
+    ctx = click.get_current_context()
+    report = Report(verbose=ctx.meta["sr3d.verbose"])
+    out_root = Path(out) if out else Path(scene)
+    per_frame: dict[str, dict] = {}
+    pairs = list(iter_frames(open_scenes(scene, cfg, out), frames, report))
+    for source, frame_id in tqdm(pairs, desc="evaluate grasps", unit="frame",
+                                 disable=ctx.meta["sr3d.quiet"]):
+        try:
+            per_frame[source.frame_key(frame_id)] = evaluate_grasp_frame(source, frame_id, cfg)
+        except Exception as exc:
+            report.fail(source.frame_key(frame_id), exc)
+            continue
+        report.ok()
+    summary = overall(list(per_frame.values()))
+    document = {"friction": cfg.grasp.friction, "overall": summary, "frames": per_frame,
+                "failed": report.failures,
+                "method": "jaws closed on the true meshes (ray casting from the finger pads), "
+                          "collisions with the true meshes, true depth and table, two-contact "
+                          "force closure; top-1 per true object (objects without a grasp "
+                          "count as failures), mean success of the 10 best grasps per frame"}
+    try:
+        write_json(out_root / "grasp_metrics.json", _nan_to_none(document))
+    except OSError as exc:
+        raise UsageExit(f"{out_root}: cannot write grasp_metrics.json "
+                        f"({exc.strerror or exc}); use --out DIR") from None
+    click.echo(f"frames {summary['frames']}  objects {summary['objects']}  "
+               f"top-1 success {summary['top1_success']:.3f}  "
+               f"top-10 mean {summary['top10_success']:.3f}  (friction {cfg.grasp.friction:g})")
+    click.echo("success by friction: " + "  ".join(
+        f"{k}: {v:.3f}" for k, v in summary["success_by_friction"].items()))
     report.finish("frames")

@@ -102,3 +102,29 @@ def pixel_rays(shape: tuple[int, int], K: np.ndarray) -> np.ndarray:
     h, w = shape
     v, u = np.mgrid[0:h, 0:w]
     return np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones((h, w))], axis=-1)
+
+
+def depth_normals(points: np.ndarray, step: int = 2, max_jump: float = 0.02) -> np.ndarray:
+    """Unit surface normals ``(H, W, 3)`` of a point image (from :func:`depth_to_points`),
+    facing the camera; 0 where a neighbour ``step`` pixels away is empty or further than
+    ``max_jump`` metres in depth (an occluding edge)."""
+    z = points[..., 2]
+    valid = z > 0
+    pad = np.pad(points, ((step, step), (step, step), (0, 0)))
+    vpad = np.pad(valid, step)
+    h, w = z.shape
+    right = pad[step:step + h, 2 * step:]
+    left = pad[step:step + h, :w]
+    down = pad[2 * step:, step:step + w]
+    up = pad[:h, step:step + w]
+    n = np.cross(right - left, down - up)
+    ok = valid & vpad[step:step + h, 2 * step:] & vpad[step:step + h, :w] \
+        & vpad[2 * step:, step:step + w] & vpad[:h, step:step + w]
+    for nb in (right, left, down, up):
+        ok &= np.abs(nb[..., 2] - z) <= max_jump
+    norm = np.linalg.norm(n, axis=-1)
+    ok &= norm > 0
+    n = np.where(ok[..., None], n / np.where(norm > 0, norm, 1)[..., None], 0.0)
+    flip = np.einsum("hwk,hwk->hw", n, points) > 0  # must face the camera (against the ray)
+    n[flip] *= -1
+    return n

@@ -33,3 +33,31 @@ def point_cloud_ply(depth_m: np.ndarray, rgb: np.ndarray, K: np.ndarray) -> byte
     pts = depth_to_points(depth_m, K)[valid]
     colours = np.column_stack([rgb[valid], np.full(int(valid.sum()), 255, np.uint8)])
     return trimesh.PointCloud(pts, colors=colours).export(file_type="ply", encoding="binary")
+
+
+def grasp_preview(rgb: np.ndarray, grasps, K: np.ndarray, gripper, per_object: int = 3
+                  ) -> np.ndarray:
+    """The best ``per_object`` grasps of each object drawn over the RGB image as open jaws
+    (fingers, finger bases and a stem towards the palm), green for high scores, red for low."""
+    from sr3d_cli.geometry.camera import project
+
+    out = np.ascontiguousarray(rgb.copy())
+    g = grasps.sorted()
+    for i in range(len(g) - 1, -1, -1):  # worst first, so the best are drawn on top
+        k = int(g.object_ids[i])
+        rank = sum(1 for j in range(i) if int(g.object_ids[j]) == k)
+        if rank >= per_object:
+            continue
+        w, d, L = g.widths[i], g.depths[i], gripper.finger_length
+        local = np.array([[d, -w / 2, 0], [d - L, -w / 2, 0], [d - L, w / 2, 0], [d, w / 2, 0],
+                          [d - L, 0, 0], [d - L - gripper.palm_depth / 2, 0, 0]])
+        pts = local @ g.R[i].T + g.t[i]
+        if (pts[:, 2] <= 0).any():
+            continue
+        uv = np.round(project(pts, K)).astype(np.int32)
+        s = float(np.clip(g.scores[i], 0, 1))
+        colour = (int(255 * (1 - s)), int(255 * s), 0)
+        thick = 2 if rank == 0 else 1
+        cv2.polylines(out, [uv[:4].reshape(-1, 1, 2)], False, colour, thick, cv2.LINE_AA)
+        cv2.line(out, tuple(map(int, uv[4])), tuple(map(int, uv[5])), colour, thick, cv2.LINE_AA)
+    return out

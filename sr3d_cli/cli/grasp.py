@@ -1,0 +1,45 @@
+"""``sr3d grasp SCENE``: parallel-jaw grasps on the repaired depth and the placed meshes."""
+
+from __future__ import annotations
+
+import click
+
+from sr3d_cli.cli.options import common_options, load_config, scene_options
+from sr3d_cli.cli.stage_loop import run_frames, workers_option
+
+
+@click.command()
+@click.argument("scene", type=click.Path(exists=True, file_okay=False))
+@click.option("--object", "only", type=int, default=None, help="Plan for this object id only.")
+@click.option("--from", "depth_source", type=click.Choice(["repaired", "raw"]), default=None,
+              help="Plan on the repaired scene (default) or on the raw sensor depth.")
+@click.option("--hand-poses", is_flag=True,
+              help="Also write grasps/<frame>_hand_poses.npy: (n, 4, 4) hand poses, "
+                   "Contact-GraspNet convention.")
+@click.option("--preview", is_flag=True,
+              help="Also write grasps/<frame>_preview.png: the best grasps over the RGB image.")
+@workers_option
+@scene_options
+@common_options
+def grasp(scene, only, depth_source, hand_poses, preview, workers, out, frames, fmt):
+    """Propose 6-DoF parallel-jaw grasps per object: writes grasps/<frame>.json and .npy
+    (graspnetAPI's 17 numbers per grasp). Needs masks/ and, unless --from raw, repaired/ and
+    poses/ (run `sr3d repair-depth` first)."""
+    from sr3d_cli.grasp.planner import Planner
+    from sr3d_cli.io.atomic import write_png
+    from sr3d_cli.io.preview import grasp_preview
+    from sr3d_cli.stages import grasp_frame, load_grasps
+
+    cfg = load_config({"io.format": fmt, "grasp.source": depth_source})
+    planner = Planner(cfg.grasp)
+
+    def work(frame):
+        n, messages = grasp_frame(frame, planner, cfg.plane, cfg.grasp.source, only,
+                                  cfg.grasp.base_to_tip if hand_poses else None)
+        if preview:
+            write_png(frame.scene.output_path("grasps", frame.frame_id, "_preview.png"),
+                      grasp_preview(frame.rgb, load_grasps(frame.scene, frame.frame_id),
+                                    frame.camera.K, planner.gripper))
+        return messages
+
+    run_frames("grasp", scene, cfg, out, frames, work, workers)

@@ -1,0 +1,87 @@
+"""Parallel-jaw gripper model in the grasp frame shared with graspnetAPI.
+
+Grasp frame: origin at the grasp centre (between the finger pads), x = approach (from the palm
+towards the object), y = closing direction, z = x cross y. The fingertips reach ``depth`` past the
+centre along x; each finger is ``finger_length`` long, ``finger_thickness`` thick along y and
+``finger_height`` tall along z; the palm sits behind the finger bases. Franka Emika hand sizes by
+default (config ``grasp``), rounded: 0.08 m opening, 0.05 m fingers, a 0.2 m wide palm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Gripper:
+    max_width: float = 0.08
+    finger_length: float = 0.05
+    finger_thickness: float = 0.01
+    finger_height: float = 0.02
+    palm_width: float = 0.2
+    palm_height: float = 0.06
+    palm_depth: float = 0.06
+
+    @classmethod
+    def from_config(cls, cfg) -> "Gripper":
+        return cls(cfg.max_width, cfg.finger_length, cfg.finger_thickness, cfg.finger_height,
+                   cfg.palm_width, cfg.palm_height, cfg.palm_depth)
+
+    def boxes(self, width, depth) -> np.ndarray:
+        """Axis-aligned boxes ``(..., 3, 2, 3)`` (left finger, right finger, palm; lower and
+        upper corner) in the grasp frame for openings ``width`` and depths ``depth`` (arrays
+        broadcast together)."""
+        w = np.asarray(width, dtype=np.float64)[..., None]
+        d = np.asarray(depth, dtype=np.float64)[..., None]
+        L, T, H = self.finger_length, self.finger_thickness, self.finger_height
+        one = np.ones_like(w + d)
+        left = np.stack([np.concatenate([d - L, -w / 2 - T, -H / 2 * one], -1),
+                         np.concatenate([d, -w / 2, H / 2 * one], -1)], -2)
+        right = np.stack([np.concatenate([d - L, w / 2, -H / 2 * one], -1),
+                          np.concatenate([d, w / 2 + T, H / 2 * one], -1)], -2)
+        palm = np.stack([np.concatenate([d - L - self.palm_depth, -self.palm_width / 2 * one,
+                                         -self.palm_height / 2 * one], -1),
+                         np.concatenate([d - L, self.palm_width / 2 * one,
+                                         self.palm_height / 2 * one], -1)], -2)
+        return np.stack([left, right, palm], -3)
+
+    def corners(self, width, depth) -> np.ndarray:
+        """The 8 corners of each box, ``(..., 24, 3)`` in the grasp frame."""
+        b = self.boxes(width, depth)
+        sel = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+        c = np.stack([b[..., sel[:, 0], 0], b[..., sel[:, 1], 1], b[..., sel[:, 2], 2]], -1)
+        return c.reshape(*c.shape[:-3], 24, 3)
+
+    def reach(self) -> float:
+        """Radius around the grasp centre that holds the whole gripper."""
+        back = self.finger_length + self.palm_depth
+        return float(np.sqrt(back ** 2 + (self.palm_width / 2) ** 2 + (self.palm_height / 2) ** 2))
+
+
+def count_inside(local: np.ndarray, boxes: np.ndarray, shrink: float = 0.0) -> np.ndarray:
+    """Points inside each box. local : (F, M, 3) grasp-frame points; boxes : (F, B, 2, 3).
+    Returns (F, B) counts."""
+    counts = np.zeros(boxes.shape[:2], dtype=np.int64)
+    for b in range(boxes.shape[1]):
+        inside = np.ones(local.shape[:2], dtype=bool)
+        for axis in range(3):
+            v = local[..., axis]
+            inside &= (v > boxes[:, b, None, 0, axis] + shrink) & \
+                (v < boxes[:, b, None, 1, axis] - shrink)
+        counts[:, b] = inside.sum(axis=1)
+    return counts
+
+
+def to_camera(R: np.ndarray, t: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """Grasp-frame points ``(..., n, 3)`` of grasps ``R (..., 3, 3)``, ``t (..., 3)`` in the
+    camera frame."""
+    return np.einsum("...ij,...nj->...ni", R, local) + t[..., None, :]
+
+
+def to_local(R: np.ndarray, t: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Camera-frame points ``(n, 3)`` in the frames of grasps ``R (F, 3, 3)``, ``t (F, 3)``:
+    ``(F, n, 3)``."""
+    R = np.asarray(R, dtype=np.float32)
+    return np.asarray(points, dtype=np.float32) @ R - (t.astype(np.float32)[:, None] @ R)

@@ -1,0 +1,245 @@
+"""Training-free antipodal grasp planner on a scene point cloud.
+
+For each object: seed points on its surface; across each seed, along its normal, the farthest
+point of the same object within the gripper's opening (the antipode); the closing direction is the
+line between them and approach directions are sampled around the table normal, perpendicular to
+it. Each candidate frame is tried at several depths (deepest first): the object's cross-section
+between the fingers sets the opening and the centre, the fingers and palm must hold no scene point
+and stay above the table, and the contact normals must lie inside the friction cone. Score:
+friction margin, opening margin and approach from above, weighted (config). Non-maximum
+suppression, then the best K per object.
+
+Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
+mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
+the depth sees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sr3d_cli.geometry.camera import depth_normals, depth_to_points
+from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.transforms import place_points
+from sr3d_cli.grasp import GraspSet
+from sr3d_cli.grasp.gripper import Gripper, count_inside, to_camera, to_local
+
+
+@dataclass
+class Cloud:
+    """points (n, 3) metres, normals (n, 3) unit (0 = unknown), labels (n,) object id (0 = none)."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    labels: np.ndarray
+
+    @classmethod
+    def concat(cls, clouds: list["Cloud"]) -> "Cloud":
+        return cls(np.concatenate([c.points for c in clouds]),
+                   np.concatenate([c.normals for c in clouds]),
+                   np.concatenate([c.labels for c in clouds]))
+
+    def select(self, keep: np.ndarray) -> "Cloud":
+        return Cloud(self.points[keep], self.normals[keep], self.labels[keep])
+
+
+def depth_cloud(depth_m: np.ndarray, K: np.ndarray, ids: np.ndarray, stride: int = 1) -> Cloud:
+    """Every ``stride``-th valid pixel of a depth map, normals from the depth, labels from ids."""
+    pts = depth_to_points(np.where(np.isfinite(depth_m), depth_m, 0.0), K)
+    nrm = depth_normals(pts)
+    sl = (slice(None, None, stride), slice(None, None, stride))
+    pts, nrm, lab = pts[sl], nrm[sl], ids[sl]
+    ok = pts[..., 2] > 0
+    return Cloud(pts[ok], nrm[ok], lab[ok].astype(np.int64))
+
+
+def mesh_cloud(mesh, T_cam_obj: np.ndarray, scale: float, label: int, count: int,
+               seed: int = 0) -> Cloud:
+    """Points spread evenly over a placed mesh's surface, with its outward face normals."""
+    import trimesh
+
+    placed = trimesh.Trimesh(place_points(mesh.vertices, T_cam_obj, scale), mesh.faces,
+                             process=False)
+    pts, faces = trimesh.sample.sample_surface(placed, count, seed=seed)
+    nrm = placed.face_normals[faces]
+    return Cloud(np.asarray(pts), np.asarray(nrm), np.full(len(pts), label, dtype=np.int64))
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 0, n, 1)
+
+
+def rotation_distance(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:
+    """Angle (radians) between grasp rotations ``(n, 3, 3)`` and one ``(3, 3)``, counting a
+    turn of 180 deg about the approach as the same grasp (the jaws are symmetric)."""
+    flip = np.diag([1.0, -1.0, -1.0])
+
+    def angle(R):
+        c = (np.einsum("nij,ij->n", Ra, R) - 1) / 2
+        return np.arccos(np.clip(c, -1, 1))
+
+    return np.minimum(angle(Rb), angle(Rb @ flip))
+
+
+def nms(grasps: GraspSet, distance: float, angle_rad: float) -> GraspSet:
+    """Greedy non-maximum suppression: best first; drop grasps near a kept one in both position
+    and rotation."""
+    g = grasps.sorted()
+    keep: list[int] = []
+    alive = np.ones(len(g), dtype=bool)
+    for i in range(len(g)):
+        if not alive[i]:
+            continue
+        keep.append(i)
+        near = (np.linalg.norm(g.t - g.t[i], axis=1) < distance) & \
+            (rotation_distance(g.R, g.R[i]) < angle_rad)
+        alive &= ~near
+    return g.take(np.array(keep, dtype=np.int64))
+
+
+class Planner:
+    def __init__(self, cfg):
+        self.cfg = cfg
+        self.gripper = Gripper.from_config(cfg)
+
+    def plan(self, scene: Cloud, targets: dict[int, Cloud], plane: Plane
+             ) -> tuple[GraspSet, list[str]]:
+        """Grasps for every object in ``targets`` (contact points), checked against ``scene``
+        (every point that can collide, targets included). Returns (grasps, object messages)."""
+        sets, messages = [], []
+        for k in sorted(targets):
+            found, why = self._object(k, targets[k], scene, plane)
+            if len(found) == 0:
+                messages.append(f"object {k}: no grasp ({why})")
+            sets.append(found)
+        return GraspSet.concat(sets), messages
+
+    # -- one object -----------------------------------------------------------------------------
+
+    def _object(self, k: int, target: Cloud, scene: Cloud, plane: Plane) -> tuple[GraspSet, str]:
+        cfg, g = self.cfg, self.gripper
+        has_normal = np.linalg.norm(target.normals, axis=1) > 0.5
+        target = target.select(has_normal)
+        if len(target.points) < 20:
+            return GraspSet.empty(), f"{len(target.points)} surface points, too few"
+        R, c = self._frames(k, target, plane)
+        if len(R) == 0:
+            return GraspSet.empty(), "no antipodal pair within the gripper's opening"
+        centre = target.points.mean(axis=0)
+        near = np.linalg.norm(scene.points - centre, axis=1) < \
+            g.reach() + np.ptp(target.points, axis=0).max()
+        # the table is checked exactly by the plane test; points at its height cannot be hit
+        # by a gripper that passes it
+        scene = scene.select(near & (plane.height(scene.points) >= cfg.clearance))
+        found = [self._try_frames(k, R[s:s + 48], c[s:s + 48], target, scene, plane)
+                 for s in range(0, len(R), 48)]
+        grasps = GraspSet.concat([f for f in found if f is not None])
+        if len(grasps) == 0:
+            return grasps, (f"no collision-free grasp inside the friction cone within the "
+                            f"{g.max_width:.3f} m opening")
+        grasps = nms(grasps, cfg.nms_distance, np.radians(cfg.nms_angle))
+        return grasps.take(slice(0, cfg.top_k)), ""
+
+    def _frames(self, k: int, target: Cloud, plane: Plane) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate grasp frames (R (F, 3, 3), centre (F, 3)) from antipodal seed pairs."""
+        cfg, g = self.cfg, self.gripper
+        rng = np.random.default_rng(k)
+        n_pts = len(target.points)
+        seeds = rng.choice(n_pts, size=min(cfg.seeds, n_pts), replace=False)
+        s, n = target.points[seeds], target.normals[seeds]
+        v = target.points[None] - s[:, None]                     # (S, M, 3)
+        along = -np.einsum("smk,sk->sm", v, n)                   # distance into the object
+        off_line = np.linalg.norm(v + along[..., None] * n[:, None], axis=-1)
+        facing = np.einsum("mk,sk->sm", target.normals, n) < -0.3
+        ok = (off_line < cfg.pair_radius) & (along > 0.003) & (along < g.max_width) & facing
+        far = np.where(ok, along, -np.inf)
+        j = np.argmax(far, axis=1)
+        has = np.isfinite(far[np.arange(len(s)), j])
+        if not has.any():
+            return np.zeros((0, 3, 3)), np.zeros((0, 3))
+        p, q = s[has], target.points[j[has]]
+        y = _unit(p - q)
+        mid = (p + q) / 2
+        down = -plane.normal
+        a0 = down - (y @ down)[:, None] * y
+        steep = np.linalg.norm(a0, axis=1) < 0.3          # closing along the table normal
+        view = _unit(mid) - np.einsum("fk,fk->f", _unit(mid), y)[:, None] * y
+        a0 = _unit(np.where(steep[:, None], view, a0))
+        b0 = np.cross(y, a0)
+        angles = np.radians(np.linspace(-90, 90, cfg.approaches)) if cfg.approaches > 1 \
+            else np.zeros(1)
+        Rs, cs = [], []
+        for th in angles:
+            a = np.cos(th) * a0 + np.sin(th) * b0
+            R = np.stack([a, y, np.cross(a, y)], axis=2)
+            up_ok = a @ down > -0.2        # never from below the table
+            Rs.append(R[up_ok])
+            cs.append(mid[up_ok])
+        return np.concatenate(Rs), np.concatenate(cs)
+
+    def _try_frames(self, k, R, c, target: Cloud, scene: Cloud, plane: Plane) -> GraspSet | None:
+        cfg, g = self.cfg, self.gripper
+        L, H = g.finger_length, g.finger_height
+        local_t = to_local(R, c, target.points)                  # (F, M, 3)
+        local_n = target.normals.astype(np.float32) @ R.astype(np.float32)
+        local_s = to_local(R, c, scene.points)
+        down = -plane.normal
+        approach_up = np.clip(R[:, :, 0] @ down, 0, 1)
+        best = np.full(len(R), -1.0)
+        out = np.zeros((len(R), 4))                               # width, depth, ymid, score
+        for depth in sorted(cfg.depths, reverse=True):
+            x, y, z = local_t[..., 0], local_t[..., 1], local_t[..., 2]
+            slab = (x > depth - L) & (x < depth) & (np.abs(z) < H / 2) & \
+                (np.abs(y) < g.max_width / 2 + 0.03)
+            count = slab.sum(axis=1)
+            y_lo = np.where(slab, y, np.inf).min(axis=1)
+            y_hi = np.where(slab, y, -np.inf).max(axis=1)
+            width = (y_hi - y_lo) + 2 * cfg.width_margin
+            ok = (count >= 3) & (width <= g.max_width) & (best < 0)
+            if not ok.any():
+                continue
+            ymid = np.where(ok, (y_hi + y_lo) / 2, 0.0)
+            width = np.where(ok, width, g.max_width)
+            # contact normals: the outermost slab points on each side
+            left = slab & (y < y_lo[:, None] + cfg.contact_band)
+            right = slab & (y > y_hi[:, None] - cfg.contact_band)
+            n_left = _unit((left[:, None].astype(np.float32) @ local_n)[:, 0])
+            n_right = _unit((right[:, None].astype(np.float32) @ local_n)[:, 0])
+            # the line between the two contact patches (their centroids)
+            c_left = (left[:, None].astype(np.float32) @ local_t)[:, 0] / \
+                np.maximum(left.sum(1), 1)[:, None]
+            c_right = (right[:, None].astype(np.float32) @ local_t)[:, 0] / \
+                np.maximum(right.sum(1), 1)[:, None]
+            line = _unit(c_right - c_left)
+            ang = np.maximum(np.arccos(np.clip(-np.sum(n_left * line, 1), -1, 1)),
+                             np.arccos(np.clip(np.sum(n_right * line, 1), -1, 1)))
+            mu_needed = np.tan(np.minimum(ang, np.radians(89.9)))
+            ok &= mu_needed <= cfg.friction
+            if not ok.any():
+                continue
+            idx = np.flatnonzero(ok)                              # collisions: survivors only
+            dd = np.full(len(idx), depth)
+            boxes = g.boxes(width[idx], dd)                       # (f, 3, 2, 3)
+            shifted = local_s[idx].copy()
+            shifted[..., 1] -= ymid[idx, None]
+            hits = count_inside(shifted, boxes).max(axis=1)
+            centre = c[idx] + R[idx, :, 1] * ymid[idx, None]
+            corners = to_camera(R[idx], centre, g.corners(width[idx], dd))
+            ok[idx] = (hits < cfg.collision_points) & \
+                (plane.height(corners).min(axis=1) >= cfg.clearance)
+            score = (cfg.friction_weight * (1 - mu_needed / cfg.friction)
+                     + cfg.width_weight * (1 - width / g.max_width)
+                     + cfg.approach_weight * approach_up)
+            take = ok & (best < 0)
+            best[take] = score[take]
+            out[take] = np.stack([width, np.full(len(R), depth), ymid, score], 1)[take]
+        keep = best >= 0
+        if not keep.any():
+            return None
+        n = int(keep.sum())
+        w, d, ymid, score = out[keep].T
+        centre = c[keep] + R[keep][:, :, 1] * ymid[:, None]
+        return GraspSet(score, w, np.full(n, H), d, R[keep], centre, np.full(n, k, np.int64))

@@ -1,0 +1,196 @@
+"""Grasp quality against the truth: close the jaws on the true meshes, test force closure.
+
+For each grasp: (1) the opening must fit the gripper; (2) the open gripper (fingers at the stated
+width, palm) must not hold points of the true scene (true meshes sampled densely, plus the true
+depth) nor reach below the table; (3) each finger closes along the closing direction until it
+first touches a true mesh (exact ray casting from a grid on the finger pad); both fingers must
+touch the same object; (4) force closure of the two contacts with Coulomb friction: the line
+between the contacts must lie inside both friction cones. The smallest friction coefficient for
+which (4) holds is recorded, so success at any coefficient (GraspNet-1Billion uses 0.2 ... 1.2)
+is read off without re-running.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.raycast import first_hits
+from sr3d_cli.grasp import GraspSet
+from sr3d_cli.grasp.gripper import Gripper, count_inside, to_camera, to_local
+
+FRICTIONS = (0.2, 0.4, 0.5, 0.6, 0.8, 1.0, 1.2)
+
+
+@dataclass
+class TrueScene:
+    """ids (n,), triangles: list of (m, 3, 3) camera-frame triangles per object, points: the
+    collision cloud (n, 3), samples: per-object surface samples (for matching grasps to
+    objects), plane: the true table."""
+
+    ids: list[int]
+    triangles: list[np.ndarray]
+    points: np.ndarray
+    samples: list[np.ndarray]
+    plane: Plane
+
+    @classmethod
+    def build(cls, objects: list[tuple[int, object]], depth_points: np.ndarray, plane: Plane,
+              density: float = 2.5e5) -> "TrueScene":
+        """objects: (id, camera-frame trimesh); depth_points: the true depth as points;
+        density: surface samples per square metre for the collision cloud."""
+        import trimesh
+
+        tris, samples = [], []
+        for i, (_, mesh) in enumerate(objects):
+            tris.append(np.asarray(mesh.triangles))
+            n = int(min(max(mesh.area * density, 2000), 60000))
+            pts, _ = trimesh.sample.sample_surface(mesh, n, seed=i)
+            samples.append(np.asarray(pts))
+        points = np.concatenate([depth_points] + samples) if samples else depth_points
+        return cls([k for k, _ in objects], tris, points, samples, plane)
+
+    def nearest_object(self, point: np.ndarray, within: float) -> int | None:
+        best, who = within, None
+        for k, s in zip(self.ids, self.samples):
+            d = float(np.min(np.linalg.norm(s - point, axis=1)))
+            if d < best:
+                best, who = d, k
+        return who
+
+
+def _pad_rays(gripper: Gripper, width: float, depth: float, nx: int = 6, nz: int = 3):
+    """Ray origins on both finger pads (grasp frame) and their closing directions."""
+    L, H = gripper.finger_length, gripper.finger_height
+    xs = np.linspace(depth - L + 0.002, depth - 0.001, nx)
+    zs = np.linspace(-H / 2 + 0.001, H / 2 - 0.001, nz)
+    gx, gz = [a.ravel() for a in np.meshgrid(xs, zs)]
+    left = np.stack([gx, np.full_like(gx, -width / 2), gz], 1)
+    right = np.stack([gx, np.full_like(gx, width / 2), gz], 1)
+    return left, right
+
+
+def _contact(origins: np.ndarray, direction: np.ndarray, truth: TrueScene, width: float,
+             tie: float = 0.001):
+    """Where a finger closing from ``origins`` along ``direction`` first touches: (object id,
+    contact points (p, 3), outward normals (p, 3)) or None. Every ray that touches within ``tie``
+    of the first belongs to the contact patch (a flat pad on a cylinder touches along a line)."""
+    dirs = np.broadcast_to(direction, origins.shape)
+    best = None
+    for k, tri in zip(truth.ids, truth.triangles):
+        dist, face = first_hits(origins, dirs, tri, max_distance=width)
+        if np.isfinite(dist).any() and (best is None or dist.min() < best[1].min()):
+            best = (k, dist, face, tri)
+    if best is None:
+        return None
+    k, dist, face, tri = best
+    patch = dist <= dist.min() + tie
+    points = origins[patch] + dist[patch, None] * direction
+    t = tri[face[patch]]
+    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    n = np.where((n @ direction < 0)[:, None], n, -n)  # the side facing the finger
+    return k, points, n
+
+
+def closure_angle(p_l, n_l, p_r, n_r) -> float:
+    """Smallest over contact pairs of the larger angle between a contact's inward normal and
+    the line to the other contact (radians); force closure at friction mu iff tan(angle) <= mu.
+    p_*, n_* : (p, 3) patch points and outward normals of the left and right finger."""
+    line = p_r[None] - p_l[:, None]                               # (l, r, 3)
+    norm = np.linalg.norm(line, axis=-1)
+    line = line / np.maximum(norm, 1e-12)[..., None]
+    a_l = np.arccos(np.clip(-np.einsum("lrk,lk->lr", line, n_l), -1, 1))
+    a_r = np.arccos(np.clip(np.einsum("lrk,rk->lr", line, n_r), -1, 1))
+    worst = np.where(norm > 1e-6, np.maximum(a_l, a_r), np.pi)
+    return float(worst.min())
+
+
+def judge(grasps: GraspSet, truth: TrueScene, gripper: Gripper, *, tolerance: float = 0.001,
+          collision_points: int = 2) -> list[dict]:
+    """One record per grasp: ``object`` (true id it is matched to, or None), ``reason``
+    ("ok", "too wide", "collision", "below table", "no contact", "two objects"), ``mu`` (smallest
+    friction coefficient giving force closure; inf when it fails before the friction test)."""
+    out = []
+    for i in range(len(grasps)):
+        R, t = grasps.R[i], grasps.t[i]
+        w, d = float(grasps.widths[i]), float(grasps.depths[i])
+        rec = {"object": truth.nearest_object(t, 0.03), "mu": math.inf}
+        out.append(rec)
+        if w > gripper.max_width + 1e-9:
+            rec["reason"] = "too wide"
+            continue
+        boxes = gripper.boxes(w, d)[None]
+        local = to_local(R[None], t[None], truth.points)
+        if count_inside(local, boxes, shrink=tolerance).max() >= collision_points:
+            rec["reason"] = "collision"
+            continue
+        corners = to_camera(R, t, gripper.corners(w, d))
+        if truth.plane.height(corners).min() < -tolerance:
+            rec["reason"] = "below table"
+            continue
+        contacts = [_contact(origins @ R.T + t, direction, truth, w)
+                    for origins, direction in zip(_pad_rays(gripper, w, d), (R[:, 1], -R[:, 1]))]
+        if any(c is None for c in contacts):
+            rec["reason"] = "no contact"
+            continue
+        if contacts[0][0] != contacts[1][0]:
+            rec["reason"] = "two objects"
+            continue
+        rec["object"] = contacts[0][0]
+        (_, p_l, n_l), (_, p_r, n_r) = contacts
+        angle = closure_angle(p_l, n_l, p_r, n_r)
+        rec["mu"] = math.tan(min(angle, math.radians(89.99)))
+        rec["reason"] = "ok"
+    return out
+
+
+def summarise(grasps: GraspSet, records: list[dict], object_ids: list[int], friction: float,
+              top: int = 10) -> dict:
+    """Per-frame numbers: top-1 success per true object, mean success of the best ``top``
+    grasps, success at each coefficient of :data:`FRICTIONS`."""
+    success = np.array([r["reason"] == "ok" and r["mu"] <= friction for r in records], bool)
+    order = np.argsort(-grasps.scores, kind="stable")
+    top1 = {}
+    for k in object_ids:
+        mine = [i for i in order if records[i]["object"] == k]
+        top1[str(k)] = bool(success[mine[0]]) if mine else None
+    best = order[:top]
+    reasons: dict[str, int] = {}
+    for r in records:
+        reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
+    return {
+        "grasps": len(grasps),
+        "objects": len(object_ids),
+        "objects_with_grasps": sum(v is not None for v in top1.values()),
+        "top1": top1,
+        "top1_success": (sum(bool(v) for v in top1.values()) / len(object_ids)
+                         if object_ids else math.nan),
+        f"top{top}_success": float(success[best].mean()) if len(best) else 0.0,
+        "success_by_friction": {f"{mu:.1f}": float(np.mean([r["reason"] == "ok" and r["mu"] <= mu
+                                                            for r in records]))
+                                if records else math.nan for mu in FRICTIONS},
+        "reasons": reasons,
+    }
+
+
+def overall(frames: list[dict]) -> dict:
+    """Numbers over frames: top-1 success over all true objects, the other rates averaged over
+    frames."""
+    objects = sum(f["objects"] for f in frames)
+    wins = sum(sum(bool(v) for v in f["top1"].values()) for f in frames)
+
+    def mean(key, sub=None):
+        vals = [f[key] if sub is None else f[key][sub] for f in frames]
+        vals = [v for v in vals if not (isinstance(v, float) and math.isnan(v))]
+        return float(np.mean(vals)) if vals else math.nan
+
+    return {"frames": len(frames), "objects": objects,
+            "objects_with_grasps": sum(f["objects_with_grasps"] for f in frames),
+            "top1_success": wins / objects if objects else math.nan,
+            "top10_success": mean("top10_success"),
+            "success_by_friction": {mu: mean("success_by_friction", mu)
+                                    for mu in (frames[0]["success_by_friction"] if frames else {})}}
