@@ -113,7 +113,7 @@ class GraspConfig:
     palm_height: float = 0.06
     palm_depth: float = 0.06
     base_to_tip: float = 0.1034
-    depths: list[float] = field(default_factory=lambda: [0.01, 0.02, 0.03, 0.04])
+    depths: list[float] = field(default_factory=lambda: [0.005, 0.01, 0.02, 0.03, 0.04])
     friction: float = 0.5
     width_margin: float = 0.005
     clearance: float = 0.003
@@ -122,6 +122,7 @@ class GraspConfig:
     pair_radius: float = 0.004
     contact_band: float = 0.002
     collision_points: int = 3
+    collision_margin: float = 0.003
     mesh_points: int = 3000
     stride: int = 3
     nms_distance: float = 0.03

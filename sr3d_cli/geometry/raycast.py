@@ -37,8 +37,8 @@ def first_hits(origins: np.ndarray, directions: np.ndarray, triangles: np.ndarra
             q = np.cross(s, e1[None])
             v = np.einsum("nk,nmk->nm", d, q) * inv
             t = np.einsum("mk,nmk->nm", e2, q) * inv
-        ok = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) \
-            & (t <= max_distance)
+            ok = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) \
+                & (t <= max_distance)
         t = np.where(ok, t, np.inf)
         j = np.argmin(t, axis=1)
         tj = t[np.arange(len(o)), j]

@@ -125,7 +125,7 @@ class Planner:
         target = target.select(has_normal)
         if len(target.points) < 20:
             return GraspSet.empty(), f"{len(target.points)} surface points, too few"
-        R, c = self._frames(k, target, plane)
+        R, c, span = self._frames(k, target, plane)
         if len(R) == 0:
             return GraspSet.empty(), "no antipodal pair within the gripper's opening"
         centre = target.points.mean(axis=0)
@@ -134,7 +134,8 @@ class Planner:
         # the table is checked exactly by the plane test; points at its height cannot be hit
         # by a gripper that passes it
         scene = scene.select(near & (plane.height(scene.points) >= cfg.clearance))
-        found = [self._try_frames(k, R[s:s + 48], c[s:s + 48], target, scene, plane)
+        found = [self._try_frames(k, R[s:s + 48], c[s:s + 48], span[s:s + 48], target, scene,
+                                  plane)
                  for s in range(0, len(R), 48)]
         grasps = GraspSet.concat([f for f in found if f is not None])
         if len(grasps) == 0:
@@ -143,8 +144,9 @@ class Planner:
         grasps = nms(grasps, cfg.nms_distance, np.radians(cfg.nms_angle))
         return grasps.take(slice(0, cfg.top_k)), ""
 
-    def _frames(self, k: int, target: Cloud, plane: Plane) -> tuple[np.ndarray, np.ndarray]:
-        """Candidate grasp frames (R (F, 3, 3), centre (F, 3)) from antipodal seed pairs."""
+    def _frames(self, k: int, target: Cloud, plane: Plane):
+        """Candidate grasp frames from antipodal seed pairs: R (F, 3, 3), centre (F, 3), and the
+        distance between the pair (F,)."""
         cfg, g = self.cfg, self.gripper
         rng = np.random.default_rng(k)
         n_pts = len(target.points)
@@ -154,13 +156,18 @@ class Planner:
         along = -np.einsum("smk,sk->sm", v, n)                   # distance into the object
         off_line = np.linalg.norm(v + along[..., None] * n[:, None], axis=-1)
         facing = np.einsum("mk,sk->sm", target.normals, n) < -0.3
-        ok = (off_line < cfg.pair_radius) & (along > 0.003) & (along < g.max_width) & facing
+        ok = (off_line < cfg.pair_radius) & (along > 0.0015) & (along < g.max_width) & facing
+        # two partners per seed: the farthest (across the whole object) and the nearest (across
+        # one wall, e.g. the rim of a glass); the same point for a convex solid
         far = np.where(ok, along, -np.inf)
-        j = np.argmax(far, axis=1)
-        has = np.isfinite(far[np.arange(len(s)), j])
+        near = np.where(ok, along, np.inf)
+        has = np.isfinite(far.max(axis=1))
         if not has.any():
-            return np.zeros((0, 3, 3)), np.zeros((0, 3))
-        p, q = s[has], target.points[j[has]]
+            return np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0)
+        j_far, j_near = np.argmax(far, axis=1)[has], np.argmin(near, axis=1)[has]
+        distinct = j_near != j_far
+        p = np.concatenate([s[has], s[has][distinct]])
+        q = target.points[np.concatenate([j_far, j_near[distinct]])]
         y = _unit(p - q)
         mid = (p + q) / 2
         down = -plane.normal
@@ -171,16 +178,47 @@ class Planner:
         b0 = np.cross(y, a0)
         angles = np.radians(np.linspace(-90, 90, cfg.approaches)) if cfg.approaches > 1 \
             else np.zeros(1)
-        Rs, cs = [], []
+        Rs, cs, spans = [], [], []
         for th in angles:
             a = np.cos(th) * a0 + np.sin(th) * b0
             R = np.stack([a, y, np.cross(a, y)], axis=2)
             up_ok = a @ down > -0.2        # never from below the table
             Rs.append(R[up_ok])
             cs.append(mid[up_ok])
-        return np.concatenate(Rs), np.concatenate(cs)
+            spans.append(np.linalg.norm(p - q, axis=1)[up_ok])
+        return np.concatenate(Rs), np.concatenate(cs), np.concatenate(spans)
 
-    def _try_frames(self, k, R, c, target: Cloud, scene: Cloud, plane: Plane) -> GraspSet | None:
+    def _between_jaws(self, y: np.ndarray, slab: np.ndarray, span: np.ndarray,
+                      bin_size: float = 0.001) -> np.ndarray:
+        """Which slab points the jaws enclose: from the seed pair (+-span/2) outwards on each
+        side, up to the first empty gap a finger fits in. y, slab : (F, M); span : (F,)."""
+        g = self.gripper
+        reach = g.max_width + g.finger_thickness
+        nb = int(np.ceil(2 * reach / bin_size))
+        b = np.clip(((y + reach) / bin_size).astype(np.int64), 0, nb - 1)
+        use = slab & (np.abs(y) < reach)
+        f = np.broadcast_to(np.arange(len(y))[:, None], y.shape)
+        occ = np.bincount((f * nb + b)[use], minlength=len(y) * nb).reshape(len(y), nb) > 0
+        gap = max(int(np.ceil(g.finger_thickness / bin_size)), 1)
+        csum = np.concatenate([np.zeros((len(y), 1), np.int64), np.cumsum(occ, 1)], 1)
+        empty = np.zeros_like(occ)
+        empty[:, :nb - gap + 1] = (csum[:, gap:] - csum[:, :-gap]) == 0  # gap starts at bin
+        idx = np.arange(nb)
+        start_hi = ((span / 2 + reach) / bin_size).astype(np.int64)
+        start_lo = ((-span / 2 + reach) / bin_size).astype(np.int64)
+        hi_ok = empty & (idx[None] >= start_hi[:, None])
+        edge_hi = np.where(hi_ok.any(1), np.argmax(hi_ok, 1), nb)
+        # on the low side the gap must end at or below the pair: its last bin <= start_lo
+        lo_ok = empty & (idx[None] + gap - 1 <= start_lo[:, None])
+        edge_lo = np.where(lo_ok.any(1), nb - 1 - np.argmax(lo_ok[:, ::-1], 1) + gap - 1, -1)
+        return (b > edge_lo[:, None]) & (b < edge_hi[:, None])
+
+    def _try_frames(self, k, R, c, span, target: Cloud, scene: Cloud, plane: Plane
+                    ) -> GraspSet | None:
+        """The best depth of each frame that holds: the object's section between the jaws (see
+        :meth:`_between_jaws`) sets the opening; fingers and palm, inflated by
+        ``collision_margin``, hold fewer than ``collision_points`` scene points and clear the
+        table; both contacts lie inside the friction cone."""
         cfg, g = self.cfg, self.gripper
         L, H = g.finger_length, g.finger_height
         local_t = to_local(R, c, target.points)                  # (F, M, 3)
@@ -192,8 +230,9 @@ class Planner:
         out = np.zeros((len(R), 4))                               # width, depth, ymid, score
         for depth in sorted(cfg.depths, reverse=True):
             x, y, z = local_t[..., 0], local_t[..., 1], local_t[..., 2]
-            slab = (x > depth - L) & (x < depth) & (np.abs(z) < H / 2) & \
-                (np.abs(y) < g.max_width / 2 + 0.03)
+            m = cfg.collision_margin  # the section under the (inflated) finger pads
+            slab = (x > depth - L - m) & (x < depth + m) & (np.abs(z) < H / 2 + m)
+            slab &= self._between_jaws(y, slab, span)
             count = slab.sum(axis=1)
             y_lo = np.where(slab, y, np.inf).min(axis=1)
             y_hi = np.where(slab, y, -np.inf).max(axis=1)
@@ -225,7 +264,7 @@ class Planner:
             boxes = g.boxes(width[idx], dd)                       # (f, 3, 2, 3)
             shifted = local_s[idx].copy()
             shifted[..., 1] -= ymid[idx, None]
-            hits = count_inside(shifted, boxes).max(axis=1)
+            hits = count_inside(shifted, boxes, shrink=-cfg.collision_margin).max(axis=1)
             centre = c[idx] + R[idx, :, 1] * ymid[idx, None]
             corners = to_camera(R[idx], centre, g.corners(width[idx], dd))
             ok[idx] = (hits < cfg.collision_points) & \

@@ -1,8 +1,8 @@
 """Grasp quality against the truth: close the jaws on the true meshes, test force closure.
 
 For each grasp: (1) the opening must fit the gripper; (2) the open gripper (fingers at the stated
-width, palm) must not hold points of the true scene (true meshes sampled densely, plus the true
-depth) nor reach below the table; (3) each finger closes along the closing direction until it
+width, palm) must not reach below the table nor hold points of the true scene (true meshes
+sampled densely, plus the true depth); (3) each finger closes along the closing direction until it
 first touches a true mesh (exact ray casting from a grid on the finger pad); both fingers must
 touch the same object; (4) force closure of the two contacts with Coulomb friction: the line
 between the contacts must lie inside both friction cones. The smallest friction coefficient for
@@ -123,14 +123,14 @@ def judge(grasps: GraspSet, truth: TrueScene, gripper: Gripper, *, tolerance: fl
         if w > gripper.max_width + 1e-9:
             rec["reason"] = "too wide"
             continue
+        corners = to_camera(R, t, gripper.corners(w, d))
+        if truth.plane.height(corners).min() < -tolerance:
+            rec["reason"] = "below table"
+            continue
         boxes = gripper.boxes(w, d)[None]
         local = to_local(R[None], t[None], truth.points)
         if count_inside(local, boxes, shrink=tolerance).max() >= collision_points:
             rec["reason"] = "collision"
-            continue
-        corners = to_camera(R, t, gripper.corners(w, d))
-        if truth.plane.height(corners).min() < -tolerance:
-            rec["reason"] = "below table"
             continue
         contacts = [_contact(origins @ R.T + t, direction, truth, w)
                     for origins, direction in zip(_pad_rays(gripper, w, d), (R[:, 1], -R[:, 1]))]

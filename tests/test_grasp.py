@@ -1,0 +1,171 @@
+"""sr3d grasp and grasp evaluation: known boxes and cylinders on a table, hand-made grasps."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+from click.testing import CliRunner
+
+from sr3d_cli.cli import cli
+from sr3d_cli.config import Config
+from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.raycast import first_hits
+from sr3d_cli.grasp import GraspSet
+from sr3d_cli.grasp.gripper import Gripper
+from sr3d_cli.grasp.planner import Cloud, Planner, mesh_cloud
+from sr3d_cli.grasp.quality import TrueScene, judge, summarise
+
+TABLE_Z = 0.6  # camera looks straight down at a table 0.6 m away
+PLANE = Plane(np.array([0.0, 0.0, -1.0]), TABLE_Z)
+
+
+def _on_table(mesh: trimesh.Trimesh, x: float = 0.0, y: float = 0.0) -> trimesh.Trimesh:
+    """The mesh (object z up) standing on the table at (x, y): object +z = camera -z."""
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    lo = mesh.bounds[0, 2]
+    T[:3, 3] = [x, y, TABLE_Z + lo]
+    placed = mesh.copy()
+    placed.apply_transform(T)
+    return placed
+
+
+def _table_cloud(step: float = 0.004, half: float = 0.2) -> Cloud:
+    g = np.arange(-half, half, step)
+    xx, yy = np.meshgrid(g, g)
+    pts = np.stack([xx.ravel(), yy.ravel(), np.full(xx.size, TABLE_Z)], 1)
+    return Cloud(pts, np.tile([0.0, 0.0, -1.0], (len(pts), 1)), np.zeros(len(pts), np.int64))
+
+
+def _plan(mesh: trimesh.Trimesh):
+    target = mesh_cloud(mesh, np.eye(4), 1.0, 1, 3000)
+    scene = Cloud.concat([_table_cloud(), target])
+    planner = Planner(Config().grasp)
+    return planner.plan(scene, {1: target}, PLANE)
+
+
+def _truth(meshes) -> TrueScene:
+    return TrueScene.build(list(enumerate(meshes, start=1)), np.zeros((0, 3)), PLANE)
+
+
+def test_raycast_hits_a_triangle_where_expected():
+    tri = np.array([[[0, 0, 1.0], [1, 0, 1.0], [0, 1, 1.0]]])
+    dist, face = first_hits(np.array([[0.2, 0.2, 0], [2, 2, 0]]), np.array([[0, 0, 2.0]] * 2),
+                            tri)
+    assert dist[0] == pytest.approx(0.5) and face[0] == 0
+    assert np.isinf(dist[1]) and face[1] == -1
+
+
+def test_box_is_grasped_across_its_width():
+    box = _on_table(trimesh.creation.box(extents=(0.05, 0.03, 0.08)))
+    grasps, messages = _plan(box)
+    assert not messages and len(grasps) >= 3
+    margin = Config().grasp.width_margin
+    for i in range(len(grasps)):
+        closing = np.abs(grasps.R[i][:, 1])
+        across = closing[:2].max()
+        assert across > 0.95, "closes along a face normal of the box"
+        side = 0.05 if closing[0] > closing[1] else 0.03
+        assert grasps.widths[i] == pytest.approx(side + 2 * margin, abs=0.004)
+    records = judge(grasps, _truth([box]), Gripper())
+    summary = summarise(grasps, records, [1], friction=0.5)
+    assert summary["top1"] == {"1": True}
+    assert summary["top10_success"] >= 0.8
+
+
+def test_cylinder_is_grasped_across_its_diameter():
+    cyl = _on_table(trimesh.creation.cylinder(radius=0.025, height=0.1, sections=64))
+    grasps, _ = _plan(cyl)
+    assert len(grasps) >= 3
+    axis = np.array([0.0, 0.0, 1.0])
+    for i in range(len(grasps)):
+        if abs(grasps.R[i][:, 1] @ axis) < 0.2:  # across the body (not over the top face)
+            assert grasps.widths[i] == pytest.approx(0.05 + 0.01, abs=0.004)
+    records = judge(grasps, _truth([cyl]), Gripper())
+    assert summarise(grasps, records, [1], friction=0.5)["top1"] == {"1": True}
+
+
+def test_object_wider_than_the_gripper_gets_no_grasp():
+    wide = _on_table(trimesh.creation.box(extents=(0.12, 0.12, 0.05)))
+    grasps, messages = _plan(wide)
+    assert len(grasps) == 0
+    assert messages and "0.080 m opening" in messages[0]
+
+
+def _hand_grasp(width: float, centre_height: float, depth: float) -> GraspSet:
+    R = np.stack([[0, 0, 1.0], [1.0, 0, 0], [0, -1.0, 0]], axis=1)  # approach down, close x
+    row = np.concatenate([[1.0, width, 0.02, depth], R.ravel(),
+                          [0, 0, TABLE_Z - centre_height], [1]])
+    return GraspSet.from_array(row[None])
+
+
+def test_evaluator_accepts_antipodal_and_rejects_table_and_too_wide():
+    box = _on_table(trimesh.creation.box(extents=(0.05, 0.03, 0.08)))
+    truth = _truth([box])
+    good = judge(_hand_grasp(0.06, 0.06, 0.02), truth, Gripper())[0]
+    assert good["reason"] == "ok" and good["mu"] < 0.05 and good["object"] == 1
+    through_table = judge(_hand_grasp(0.06, 0.01, 0.04), truth, Gripper())[0]
+    assert through_table["reason"] == "below table"
+    too_wide = judge(_hand_grasp(0.09, 0.06, 0.02), truth, Gripper())[0]
+    assert too_wide["reason"] == "too wide"
+    empty = judge(_hand_grasp(0.06, 0.06, 0.02).take(slice(0, 0)), truth, Gripper())
+    assert empty == []
+
+
+def test_graspnet_layout_round_trip():
+    g = _hand_grasp(0.06, 0.06, 0.02)
+    a = g.to_array()
+    assert a.shape == (1, 17) and a[0, 1] == 0.06 and a[0, 16] == 1
+    assert np.allclose(a[0, 4:13].reshape(3, 3)[:, 0], [0, 0, 1])  # x = approach
+    back = GraspSet.from_array(a)
+    assert np.allclose(back.to_array(), a)
+    pose = g.hand_poses(0.1034)[0]
+    tip = g.t[0] + g.R[0][:, 0] * g.depths[0]
+    assert np.allclose(pose[:3, 3] + pose[:3, 2] * 0.1034, tip)  # fingertips 0.1034 along z
+    with pytest.raises(ValueError, match="17"):
+        GraspSet.from_array(np.zeros((2, 16)))
+
+
+def test_grasp_cli_bad_frames_give_empty_valid_files(synth_set, tmp_path):
+    scene = synth_set / "scene_0001"
+    runner = CliRunner()
+    out = tmp_path / "nomasks"
+    result = runner.invoke(cli, ["grasp", str(scene), "--out", str(out), "-q"])
+    assert result.exit_code == 0, result.output
+    doc = json.loads((out / "grasps" / "000000.json").read_text())
+    assert doc["grasps"] == [] and "no masks" in doc["failed"][0]
+    assert np.load(out / "grasps" / "000000.npy").shape == (0, 17)
+    # masks but no repaired depth
+    result = runner.invoke(cli, ["segment", str(scene), "--out", str(out), "-q"])
+    assert result.exit_code == 0, result.output
+    result = runner.invoke(cli, ["grasp", str(scene), "--out", str(out), "-q"])
+    doc = json.loads((out / "grasps" / "000000.json").read_text())
+    assert doc["grasps"] == [] and "no repaired depth" in doc["failed"][0]
+
+
+def test_grasp_end_to_end_beats_raw_depth(synth_set, tmp_path):
+    """Repair, plan on repaired and on raw depth, judge both against the true meshes."""
+    runner = CliRunner()
+    wins = {"repaired": 0, "raw": 0}
+    objects = 0
+    for name in ("scene_0000", "scene_0002", "scene_0003"):
+        scene, out = synth_set / name, tmp_path / name
+        assert runner.invoke(cli, ["repair-depth", str(scene), "--out", str(out), "-q"]
+                             ).exit_code == 0
+        for source in ("raw", "repaired"):
+            result = runner.invoke(cli, ["grasp", str(scene), "--out", str(out), "-q",
+                                         "--from", source, "--preview", "--hand-poses"])
+            assert result.exit_code == 0, result.output
+            result = runner.invoke(cli, ["evaluate", str(scene), "--out", str(out), "-q",
+                                         "--grasps"])
+            assert result.exit_code == 0, result.output
+            doc = json.loads((out / "grasp_metrics.json").read_text())
+            wins[source] += sum(bool(v) for v in doc["frames"]["000000"]["top1"].values())
+        objects += doc["overall"]["objects"]
+        assert (out / "grasps" / "000000_preview.png").is_file()
+        assert np.load(out / "grasps" / "000000_hand_poses.npy").shape[1:] == (4, 4)
+    assert wins["repaired"] / objects >= 0.5
+    assert wins["repaired"] > wins["raw"]
