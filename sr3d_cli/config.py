@@ -176,7 +176,7 @@ class Config:
 
 
 CHOICES: dict[str, tuple[str, ...]] = {
-    "io.format": ("auto", "native", "cleargrasp"),
+    "io.format": ("auto", "native", "cleargrasp", "transcg", "bop"),
     "render.backend": ("auto", "pyrender", "numpy"),
     "segment.backend": ("training-free", "sam-onnx", "import"),
     "reconstruct.backend": ("revolution", "onnx", "library"),

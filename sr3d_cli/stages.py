@@ -72,6 +72,19 @@ def mesh_path(source: SceneSource, frame_id: str, obj_id: int, suffix: str = ".p
     return source.out / "meshes" / frame_id / f"{obj_id}{suffix}"
 
 
+def mesh_outputs(source: SceneSource, frame_id: str) -> list:
+    """The mesh files reconstruct writes for a frame: one per instance in ``masks/`` (a
+    path that cannot exist when the frame has no masks yet)."""
+    path = source.stage_file("masks", frame_id, (".json",))
+    try:
+        objects = json.loads(path.read_text(encoding="utf-8"))["objects"] if path else None
+    except (OSError, ValueError, KeyError, TypeError):
+        objects = None
+    if objects is None:
+        return [source.out / "meshes" / frame_id / "<no masks>"]
+    return [mesh_path(source, frame_id, int(o["id"])) for o in objects]
+
+
 def find_mesh(source: SceneSource, frame_id: str, obj_id: int):
     """The mesh of an object: under the output root, else under the input root (else the
     output path, which does not exist)."""

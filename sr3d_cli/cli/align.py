@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from sr3d_cli.cli.options import common_options, load_config, scene_options
-from sr3d_cli.cli.stage_loop import run_frames, workers_option
+from sr3d_cli.cli.stage_loop import batch_options, run_frames
 
 
 @click.command()
@@ -14,13 +14,17 @@ from sr3d_cli.cli.stage_loop import run_frames, workers_option
               help="sr3d (plane prior + refinement, default) or the paper's plain method.")
 @click.option("--masks", "masks", type=click.Choice(["segment", "gt"]), default=None,
               help="Instance masks: masks/ from segment (default) or the ground truth.")
-@workers_option
+@click.option("--bop", is_flag=True,
+              help="Also write scene_gt.json per scene (BOP: cam_R_m2c, cam_t_m2c in mm).")
+@batch_options
 @scene_options
 @common_options
-def align(scene, mode, masks, workers, out, frames, fmt):
+def align(scene, mode, masks, bop, batch, out, frames, fmt):
     """Write poses/<frame>.json: T_cam_obj, scale, view and silhouette scores, diagnostics."""
     from sr3d_cli.align import Aligner
-    from sr3d_cli.stages import align_frame
+    from sr3d_cli.io.atomic import write_json
+    from sr3d_cli.io.formats.bop import bop_scene_gt
+    from sr3d_cli.stages import align_frame, load_poses
 
     cfg = load_config({"align.mode": mode, "reconstruct.masks": masks, "io.format": fmt})
     aligner = Aligner(cfg.align)
@@ -29,4 +33,14 @@ def align(scene, mode, masks, workers, out, frames, fmt):
         _, messages = align_frame(frame, aligner, cfg.plane, cfg.reconstruct.masks)
         return messages
 
-    run_frames("align", scene, cfg, out, frames, work, workers)
+    def write_bop(scenes):
+        for source in scenes:
+            poses = {}
+            for fid in source.frame_ids():
+                if source.stage_file("poses", fid, (".json",)) is not None:
+                    poses[fid] = load_poses(source, fid)
+            write_json(source.out / "scene_gt.json", bop_scene_gt(poses))
+
+    run_frames("align", scene, cfg, out, frames, work, batch=batch,
+               outputs=lambda source, fid: [source.output_path("poses", fid, ".json")],
+               after=write_bop if bop else None)

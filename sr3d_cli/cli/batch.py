@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 from typing import Iterator
 
@@ -9,16 +10,21 @@ from sr3d_cli.cli.options import UsageExit
 from sr3d_cli.cli.report import Report
 from sr3d_cli.config import Config
 from sr3d_cli.errors import ConfigError, InputError
-from sr3d_cli.io.formats import discover_scenes
+from sr3d_cli.io.formats import describe, discover_scenes
 from sr3d_cli.io.frames import select_frames
 from sr3d_cli.io.scene import SceneSource
+
+log = logging.getLogger("sr3d")
 
 
 def open_scenes(path: str | Path, cfg: Config, out: str | Path | None) -> list[SceneSource]:
     try:
-        return discover_scenes(path, cfg.io, out)
+        scenes = discover_scenes(path, cfg.io, out)
     except InputError as exc:
         raise UsageExit(str(exc)) from None
+    if cfg.io.format == "auto":
+        log.warning("format auto: found %s", describe(scenes))
+    return scenes
 
 
 def iter_frames(scenes: list[SceneSource], spec: str | None, report: Report

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from sr3d_cli.cli.options import common_options, load_config, scene_options
-from sr3d_cli.cli.stage_loop import run_frames, workers_option
+from sr3d_cli.cli.stage_loop import batch_options, run_frames
 
 
 @click.command()
@@ -18,10 +18,10 @@ from sr3d_cli.cli.stage_loop import run_frames, workers_option
                    "Contact-GraspNet convention.")
 @click.option("--preview", is_flag=True,
               help="Also write grasps/<frame>_preview.png: the best grasps over the RGB image.")
-@workers_option
+@batch_options
 @scene_options
 @common_options
-def grasp(scene, only, depth_source, hand_poses, preview, workers, out, frames, fmt):
+def grasp(scene, only, depth_source, hand_poses, preview, batch, out, frames, fmt):
     """Propose 6-DoF parallel-jaw grasps per object: writes grasps/<frame>.json and .npy
     (graspnetAPI's 17 numbers per grasp). Needs masks/ and, unless --from raw, repaired/ and
     poses/ (run `sr3d repair-depth` first)."""
@@ -42,4 +42,6 @@ def grasp(scene, only, depth_source, hand_poses, preview, workers, out, frames, 
                                     frame.camera.K, planner.gripper))
         return messages
 
-    run_frames("grasp", scene, cfg, out, frames, work, workers)
+    run_frames("grasp", scene, cfg, out, frames, work, batch=batch,
+               outputs=lambda source, fid: [source.output_path("grasps", fid, ".json"),
+                                            source.output_path("grasps", fid, ".npy")])

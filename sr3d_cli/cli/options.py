@@ -60,7 +60,7 @@ def scene_options(func):
         click.option("--out", type=click.Path(file_okay=False),
                      help="Write outputs here instead of beside the input (for read-only data)."),
         click.option("--frames", help="Frame ids: 000001,000007 or 000001-000009 (default: all)."),
-        click.option("--format", "fmt", type=click.Choice(["auto", "native", "cleargrasp"]),
+        click.option("--format", "fmt", type=click.Choice(["auto", "native", "cleargrasp", "transcg", "bop"]),
                      default=None, help="Input layout (default: io.format, auto-detected)."),
     ]
     for option in reversed(options):

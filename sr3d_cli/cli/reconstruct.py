@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from sr3d_cli.cli.options import UsageExit, common_options, load_config, scene_options
-from sr3d_cli.cli.stage_loop import run_frames
+from sr3d_cli.cli.stage_loop import batch_options, run_frames
 from sr3d_cli.errors import InputError
 
 
@@ -17,12 +17,13 @@ from sr3d_cli.errors import InputError
               help="Use masks/ from segment (default) or the ground-truth masks.")
 @click.option("--library", type=click.Path(exists=True, file_okay=False), default=None,
               help="Folder of meshes (implies --backend library).")
+@batch_options
 @scene_options
 @common_options
-def reconstruct(scene, backend, masks, library, out, frames, fmt):
+def reconstruct(scene, backend, masks, library, batch, out, frames, fmt):
     """Write meshes/<frame>/<k>.ply (object frame: base centre, +z up the axis, height 1)."""
     from sr3d_cli.reconstruct import Reconstructor
-    from sr3d_cli.stages import reconstruct_frame
+    from sr3d_cli.stages import mesh_outputs, reconstruct_frame
 
     if library and backend is None:
         backend = "library"
@@ -38,4 +39,5 @@ def reconstruct(scene, backend, masks, library, out, frames, fmt):
                                               cfg.reconstruct.masks)
         return messages
 
-    run_frames("reconstruct", scene, cfg, out, frames, work)
+    run_frames("reconstruct", scene, cfg, out, frames, work, batch=batch,
+               outputs=mesh_outputs)

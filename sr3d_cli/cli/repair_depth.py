@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from sr3d_cli.cli.options import UsageExit, common_options, load_config, scene_options
-from sr3d_cli.cli.stage_loop import run_frames, workers_option
+from sr3d_cli.cli.stage_loop import batch_options, run_frames
 from sr3d_cli.errors import InputError
 
 
@@ -15,10 +15,10 @@ from sr3d_cli.errors import InputError
 @click.option("--ply", is_flag=True, help="Also write repaired/<frame>.ply (coloured points).")
 @click.option("--preview", is_flag=True,
               help="Also write repaired/<frame>_preview.png: RGB with outlines | raw | repaired.")
-@workers_option
+@batch_options
 @scene_options
 @common_options
-def repair_depth(scene, npy, ply, preview, workers, out, frames, fmt):
+def repair_depth(scene, npy, ply, preview, batch, out, frames, fmt):
     """Run any missing stage (segment, reconstruct, align), then render the placed meshes into
     the depth: writes repaired/<frame>.png in the input's encoding."""
     from sr3d_cli.io import preview as previews
@@ -53,4 +53,10 @@ def repair_depth(scene, npy, ply, preview, workers, out, frames, fmt):
                       previews.preview_image(frame.rgb, frame.depth_m, depth, ids))
         return messages
 
-    run_frames("repair-depth", scene, cfg, out, frames, work, workers)
+    def outputs(source, fid):
+        paths = [source.output_path("repaired", fid, depth_suffix(source, fid))]
+        paths += [source.output_path("repaired", fid, ".npy")] if npy else []
+        paths += [source.output_path("repaired", fid, ".ply")] if ply else []
+        return paths + ([source.output_path("repaired", fid, "_preview.png")] if preview else [])
+
+    run_frames("repair-depth", scene, cfg, out, frames, work, batch=batch, outputs=outputs)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from sr3d_cli.cli.options import UsageExit, common_options, load_config, scene_options
-from sr3d_cli.cli.stage_loop import run_frames
+from sr3d_cli.cli.stage_loop import batch_options, run_frames
 from sr3d_cli.errors import InputError
 
 
@@ -18,9 +18,10 @@ from sr3d_cli.errors import InputError
               help="Folder of masks made elsewhere (<frame>.png; implies --backend import).")
 @click.option("--boxes", type=click.Path(exists=True), default=None,
               help="Boxes JSON (or folder) prompting SAM instead of the training-free boxes.")
+@batch_options
 @scene_options
 @common_options
-def segment(scene, backend, prompt, import_dir, boxes, out, frames, fmt):
+def segment(scene, backend, prompt, import_dir, boxes, batch, out, frames, fmt):
     """Write masks/<frame>.png (instance ids) and masks/<frame>.json (label, score, bbox)."""
     from sr3d_cli.segment import Segmenter
     from sr3d_cli.stages import write_instances
@@ -40,4 +41,6 @@ def segment(scene, backend, prompt, import_dir, boxes, out, frames, fmt):
         write_instances(frame.scene, frame.frame_id, instances, cfg.segment.backend)
         return [] if instances.objects else ["no transparent object found"]
 
-    run_frames("segment", scene, cfg, out, frames, work)
+    run_frames("segment", scene, cfg, out, frames, work, batch=batch,
+               outputs=lambda source, fid: [source.output_path("masks", fid),
+                                            source.output_path("masks", fid, ".json")])

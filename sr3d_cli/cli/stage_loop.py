@@ -1,7 +1,10 @@
 """The loop every per-frame command shares: frames -> core call -> report, one bad frame at a time.
 
 With ``workers > 1`` frames are spread over forked processes (each frame is independent and
-writes only its own files); results come back in order of completion.
+writes only its own files); results come back in order of completion. ``--shard i/N`` keeps the
+frames whose key hashes to i (stable across runs and machines, so N cluster jobs split a dataset
+without talking to each other); ``--skip-existing`` leaves frames whose outputs all exist (every
+file is written atomically, so an existing file is a whole one).
 """
 
 from __future__ import annotations
@@ -9,6 +12,8 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import traceback
+import zlib
+from pathlib import Path
 from typing import Callable
 
 import click
@@ -18,7 +23,7 @@ from sr3d_cli.cli.batch import iter_frames, open_scenes
 from sr3d_cli.cli.report import Report
 from sr3d_cli.config import Config
 from sr3d_cli.errors import Sr3dError
-from sr3d_cli.io.scene import Frame
+from sr3d_cli.io.scene import Frame, SceneSource
 
 log = logging.getLogger("sr3d")
 
@@ -36,14 +41,46 @@ def _run_one(index: int):
                                          f"{traceback.format_exc()}")
 
 
+def parse_shard(spec: str | None) -> tuple[int, int] | None:
+    if not spec:
+        return None
+    try:
+        i, n = (int(x) for x in spec.split("/"))
+    except ValueError:
+        i, n = -1, 0
+    if not (n >= 1 and 0 <= i < n):
+        raise click.BadParameter(f"expected i/N with 0 <= i < N, got {spec!r}",
+                                 param_hint="--shard")
+    return i, n
+
+
+def in_shard(key: str, shard: tuple[int, int] | None) -> bool:
+    return shard is None or zlib.crc32(key.encode("utf-8")) % shard[1] == shard[0]
+
+
 def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str | None,
-               work: Callable[[Frame], list[str]], workers: int = 1) -> None:
+               work: Callable[[Frame], list[str]], *, batch: dict | None = None,
+               outputs: Callable[[SceneSource, str], list[Path]] | None = None,
+               after: Callable[[list[SceneSource]], None] | None = None) -> None:
     """Load each selected frame and call ``work(frame)``, which returns object-level messages
-    (printed as warnings). Exceptions fail that frame only. Exits with the report's code."""
+    (printed as warnings). Exceptions fail that frame only. ``batch``: the values of
+    :func:`batch_options` (workers, shard, skip_existing); ``outputs(scene, frame_id)``: the files
+    that mark a frame done; ``after(scenes)`` runs once the frames are done. Exits with the
+    report's code."""
     ctx = click.get_current_context()
     report = Report(verbose=ctx.meta["sr3d.verbose"])
+    batch = batch or {}
+    workers = batch.get("workers", 1)
+    shard = parse_shard(batch.get("shard"))
     scenes = open_scenes(scene, cfg, out)
-    pairs = list(iter_frames(scenes, frames, report))
+    pairs = [(s, f) for s, f in iter_frames(scenes, frames, report)
+             if in_shard(s.frame_key(f), shard)]
+    if batch.get("skip_existing") and outputs is not None:
+        todo = [(s, f) for s, f in pairs if not all(p.is_file() for p in outputs(s, f))]
+        for s, f in pairs:
+            if (s, f) not in todo:
+                report.skip(s.frame_key(f), "outputs exist (--skip-existing)")
+        pairs = todo
     _JOB.update(pairs=pairs, work=work)
     bar = tqdm(total=len(pairs), desc=name, unit="frame", disable=ctx.meta["sr3d.quiet"])
     if workers > 1 and len(pairs) > 1:
@@ -67,9 +104,26 @@ def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str 
         if pool is not None:
             pool.close()
             pool.join()
+    if after is not None:
+        after(scenes)
     report.finish("frames")
 
 
-def workers_option(func):
-    return click.option("--workers", type=int, default=1, show_default=True,
-                        help="Frames processed in parallel (processes).")(func)
+def batch_options(func):
+    """``--workers``, ``--shard``, ``--skip-existing``, gathered into one ``batch`` dict."""
+    import functools
+
+    @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+                  help="Frames processed in parallel (processes).")
+    @click.option("--shard", metavar="I/N",
+                  help="Only the frames of shard I of N (0-based; stable split, e.g. a Slurm "
+                       "array or Kubernetes indexed job: --shard $IDX/$COUNT).")
+    @click.option("--skip-existing", is_flag=True,
+                  help="Leave frames whose outputs exist (resume an interrupted run).")
+    @functools.wraps(func)
+    def wrapper(*args, workers, shard, skip_existing, **kwargs):
+        parse_shard(shard)  # a bad spec is a usage error before any work
+        return func(*args, batch={"workers": workers, "shard": shard,
+                                  "skip_existing": skip_existing}, **kwargs)
+
+    return wrapper
