@@ -147,6 +147,7 @@ def grabcut_refine(rgb: np.ndarray, candidate: np.ndarray, opaque: np.ndarray, *
         return candidate
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     image = np.ascontiguousarray(rgb[y0:y1, x0:x1, ::-1])
+    cv2.setRNGSeed(0)  # GrabCut seeds its colour models with k-means: same input, same mask
     cv2.grabCut(image, gc, None, bgd, fgd, iterations, cv2.GC_INIT_WITH_MASK)
     # GrabCut may only add to the depth candidate (it is the high-precision part)
     fg = np.isin(gc, (cv2.GC_FGD, cv2.GC_PR_FGD)) | (cand > 0)
