@@ -20,6 +20,7 @@ from sr3d_cli.grasp.quality import TrueScene, judge, summarise
 
 TABLE_Z = 0.6  # camera looks straight down at a table 0.6 m away
 PLANE = Plane(np.array([0.0, 0.0, -1.0]), TABLE_Z)
+GRIPPER = Gripper.from_config(Config().grasp)
 
 
 def _on_table(mesh: trimesh.Trimesh, x: float = 0.0, y: float = 0.0) -> trimesh.Trimesh:
@@ -70,7 +71,7 @@ def test_box_is_grasped_across_its_width():
         assert across > 0.95, "closes along a face normal of the box"
         side = 0.05 if closing[0] > closing[1] else 0.03
         assert grasps.widths[i] == pytest.approx(side + 2 * margin, abs=0.004)
-    records = judge(grasps, _truth([box]), Gripper())
+    records = judge(grasps, _truth([box]), GRIPPER)
     summary = summarise(grasps, records, [1], friction=0.5)
     assert summary["top1"] == {"1": True}
     assert summary["top10_success"] >= 0.8
@@ -84,7 +85,7 @@ def test_cylinder_is_grasped_across_its_diameter():
     for i in range(len(grasps)):
         if abs(grasps.R[i][:, 1] @ axis) < 0.2:  # across the body (not over the top face)
             assert grasps.widths[i] == pytest.approx(0.05 + 0.01, abs=0.004)
-    records = judge(grasps, _truth([cyl]), Gripper())
+    records = judge(grasps, _truth([cyl]), GRIPPER)
     assert summarise(grasps, records, [1], friction=0.5)["top1"] == {"1": True}
 
 
@@ -105,13 +106,13 @@ def _hand_grasp(width: float, centre_height: float, depth: float) -> GraspSet:
 def test_evaluator_accepts_antipodal_and_rejects_table_and_too_wide():
     box = _on_table(trimesh.creation.box(extents=(0.05, 0.03, 0.08)))
     truth = _truth([box])
-    good = judge(_hand_grasp(0.06, 0.06, 0.02), truth, Gripper())[0]
+    good = judge(_hand_grasp(0.06, 0.06, 0.02), truth, GRIPPER)[0]
     assert good["reason"] == "ok" and good["mu"] < 0.05 and good["object"] == 1
-    through_table = judge(_hand_grasp(0.06, 0.01, 0.04), truth, Gripper())[0]
+    through_table = judge(_hand_grasp(0.06, 0.01, 0.04), truth, GRIPPER)[0]
     assert through_table["reason"] == "below table"
-    too_wide = judge(_hand_grasp(0.09, 0.06, 0.02), truth, Gripper())[0]
+    too_wide = judge(_hand_grasp(0.09, 0.06, 0.02), truth, GRIPPER)[0]
     assert too_wide["reason"] == "too wide"
-    empty = judge(_hand_grasp(0.06, 0.06, 0.02).take(slice(0, 0)), truth, Gripper())
+    empty = judge(_hand_grasp(0.06, 0.06, 0.02).take(slice(0, 0)), truth, GRIPPER)
     assert empty == []
 
 

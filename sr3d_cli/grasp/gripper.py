@@ -4,7 +4,8 @@ Grasp frame: origin at the grasp centre (between the finger pads), x = approach 
 towards the object), y = closing direction, z = x cross y. The fingertips reach ``depth`` past the
 centre along x; each finger is ``finger_length`` long, ``finger_thickness`` thick along y and
 ``finger_height`` tall along z; the palm sits behind the finger bases. Franka Emika hand sizes by
-default (config ``grasp``), rounded: 0.08 m opening, 0.05 m fingers, a 0.2 m wide palm.
+default (config ``grasp``, the one place the sizes are set), rounded: 0.08 m opening, 0.05 m
+fingers, a 0.2 m wide palm.
 """
 
 from __future__ import annotations
@@ -16,13 +17,13 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Gripper:
-    max_width: float = 0.08
-    finger_length: float = 0.05
-    finger_thickness: float = 0.01
-    finger_height: float = 0.02
-    palm_width: float = 0.2
-    palm_height: float = 0.06
-    palm_depth: float = 0.06
+    max_width: float
+    finger_length: float
+    finger_thickness: float
+    finger_height: float
+    palm_width: float
+    palm_height: float
+    palm_depth: float
 
     @classmethod
     def from_config(cls, cfg) -> "Gripper":
