@@ -9,6 +9,7 @@ file is written atomically, so an existing file is a whole one).
 
 from __future__ import annotations
 
+import functools
 import logging
 import multiprocessing
 import traceback
@@ -76,10 +77,12 @@ def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str 
     pairs = [(s, f) for s, f in iter_frames(scenes, frames, report)
              if in_shard(s.frame_key(f), shard)]
     if batch.get("skip_existing") and outputs is not None:
-        todo = [(s, f) for s, f in pairs if not all(p.is_file() for p in outputs(s, f))]
+        todo = []
         for s, f in pairs:
-            if (s, f) not in todo:
+            if all(p.is_file() for p in outputs(s, f)):
                 report.skip(s.frame_key(f), "outputs exist (--skip-existing)")
+            else:
+                todo.append((s, f))
         pairs = todo
     _JOB.update(pairs=pairs, work=work)
     bar = tqdm(total=len(pairs), desc=name, unit="frame", disable=ctx.meta["sr3d.quiet"])
@@ -111,7 +114,6 @@ def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str 
 
 def batch_options(func):
     """``--workers``, ``--shard``, ``--skip-existing``, gathered into one ``batch`` dict."""
-    import functools
 
     @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
                   help="Frames processed in parallel (processes).")
