@@ -21,7 +21,7 @@ demo: install
 	$(BIN)/sr3d evaluate sample_data --pred depth --pred repaired --out build/demo/sample_data --plot
 
 test: install
-	$(BIN)/python -m pytest -q tests
+	$(BIN)/python -m pytest -q -rs tests
 
 # Regenerates the bundled sample_data/ byte for byte (deterministic for the seed).
 sample-data: install

@@ -140,7 +140,41 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
             **{k: overall(v) for k, v in frames.items()}}
 
 
-def main(frames: int = 24, sections: tuple[str, ...] = ("depth", "poses", "grasp")) -> None:
+def scale_bench(synth: Path, work: Path, frames: int = 12, repeats: int = 3) -> dict:
+    """Frames per second of ``sr3d repair-depth`` as a user runs it (a fresh process, start-up
+    included) with 1 and 2 workers on the first ``frames`` synthetic scenes; median of
+    ``repeats`` runs, each into an empty output folder."""
+    import subprocess
+
+    scenes = work / "scale_in"
+    shutil.rmtree(scenes, ignore_errors=True)
+    scenes.mkdir(parents=True)
+    for i in range(frames):
+        shutil.copytree(synth / f"scene_{i:04d}", scenes / f"scene_{i:04d}",
+                        ignore=shutil.ignore_patterns("gt"))
+    sr3d = Path(sys.executable).with_name("sr3d")
+    result = {"frames": frames, "repeats": repeats}
+    for workers in (1, 2):
+        seconds = []
+        for _ in range(repeats):
+            out = work / "scale_out"
+            shutil.rmtree(out, ignore_errors=True)
+            t = time.perf_counter()
+            subprocess.run([str(sr3d), "repair-depth", str(scenes), "--out", str(out),
+                            "--workers", str(workers), "-q"], check=True)
+            seconds.append(time.perf_counter() - t)
+        result[f"workers_{workers}"] = {"seconds": float(np.median(seconds)),
+                                        "fps": frames / float(np.median(seconds))}
+        print(f"scale workers={workers} {frames / np.median(seconds):.2f} frames/s",
+              file=sys.stderr)
+    result["speedup"] = result["workers_2"]["fps"] / result["workers_1"]["fps"]
+    return result
+
+
+SECTIONS = ("depth", "poses", "grasp", "scale")
+
+
+def main(frames: int = 24, sections: tuple[str, ...] = SECTIONS) -> None:
     work = ROOT / "work"
     synth = work / "synth700"
     cfg = SynthConfig(seed=700, views=1)
@@ -154,7 +188,7 @@ def main(frames: int = 24, sections: tuple[str, ...] = ("depth", "poses", "grasp
     paper.align.rolls = 4  # 162 viewpoints x 4 rolls: 12 rolls triples a run already ~10 min
     previous = ROOT / "results.json"
     results = json.loads(previous.read_text()) if previous.is_file() else {}
-    for key in ("synthetic", "real", "poses", "timings", "grasp"):
+    for key in ("synthetic", "real", "poses", "timings", "grasp", "scale"):
         results.setdefault(key, {})
     methods = ("raw", "plane-fill", "inpaint", "paper", "sr3d")
     for label, root, masks in (("synthetic", synth, "segment"), ("real", REAL, "import")):
@@ -197,6 +231,8 @@ def main(frames: int = 24, sections: tuple[str, ...] = ("depth", "poses", "grasp
                for k in ("rotation_deg", "translation_mm", "scale_pct", "seconds")}}
     if "grasp" in sections:
         results["grasp"] = grasp_bench(synth, work, default)
+    if "scale" in sections:
+        results["scale"] = scale_bench(synth, work)
     (ROOT / "results.json").write_text(json.dumps(results, indent=1, sort_keys=True,
                                                   default=float))
     write_report(results, methods)
@@ -252,6 +288,16 @@ def write_report(results: dict, methods) -> None:
                          f"{g['top1_success']:.3f} | {g['top10_success']:.3f} |")
         lines += ["", f"- grasp stage, median seconds per frame: {grasp['median_seconds']:.3f}",
                   ""]
+    scale = results.get("scale", {})
+    if scale:
+        lines += ["## batch throughput (`sr3d repair-depth --workers N`)", "",
+                  f"{scale['frames']} synthetic frames (one scene folder each), a fresh `sr3d` "
+                  f"process per run (start-up included), median of {scale['repeats']} runs.", "",
+                  "| workers | seconds | frames/s |", "|---|---|---|"]
+        for w in (1, 2):
+            x = scale[f"workers_{w}"]
+            lines.append(f"| {w} | {x['seconds']:.1f} | {x['fps']:.2f} |")
+        lines += ["", f"- speed-up with 2 workers: {scale['speedup']:.2f}x", ""]
     (ROOT / "RESULTS.md").write_text("\n".join(lines))
 
 
@@ -277,5 +323,8 @@ def plot(results: dict, methods) -> None:
 
 
 if __name__ == "__main__":
-    # sections to run (default all): depth poses grasp; results of the others are kept
-    main(sections=tuple(sys.argv[1:]) or ("depth", "poses", "grasp"))
+    # sections to run (default all): depth poses grasp scale; results of the others are kept
+    unknown = set(sys.argv[1:]) - set(SECTIONS)
+    if unknown:
+        sys.exit(f"unknown section(s) {sorted(unknown)}; choose from {SECTIONS}")
+    main(sections=tuple(sys.argv[1:]) or SECTIONS)

@@ -1,4 +1,4 @@
-"""``sr3d import-bag REC.bag OUT``: a RealSense recording to a native scene folder."""
+"""``sr3d import-bag REC OUT``: a RealSense recording (.bag or .db3) to a native scene folder."""
 
 from __future__ import annotations
 
@@ -15,8 +15,9 @@ from sr3d_cli.cli.options import UsageExit, common_options
 @click.option("--limit", type=click.IntRange(min=1), default=None, help="At most N frames.")
 @common_options
 def import_bag(bag, out, every, limit):
-    """Write OUT/rgb, OUT/depth (aligned to colour) and OUT/camera.json (colour intrinsics, the
-    device's depth scale). Needs the realsense extra (pyrealsense2)."""
+    """Turn the RealSense recording BAG (.bag or .db3) into a scene folder: OUT/rgb, OUT/depth
+    (aligned to colour) and OUT/camera.json (colour intrinsics, the device's depth scale).
+    Needs the realsense extra (pyrealsense2)."""
     from pathlib import Path
 
     from sr3d_cli.errors import InputError
