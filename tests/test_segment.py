@@ -55,6 +55,41 @@ def test_training_free_masks_match_ground_truth(synth_set):
     assert np.mean(np.array(ious) > 0.5) >= 0.8
 
 
+def test_dropouts_beyond_the_table_are_not_objects(synth_set, monkeypatch):
+    """A wall behind the table, riddled with dropouts (as a white wall is for a RealSense):
+    none of its holes may become an instance; the objects on the table still do."""
+    from sr3d_cli.config import IOConfig
+    from sr3d_cli.io.formats import discover_scenes
+    from sr3d_cli.segment import training_free
+
+    source = next(iter(discover_scenes(synth_set, IOConfig(), None)))
+    fid = source.frame_ids()[0]
+    frame = source.load_frame(fid)
+    gt = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
+    depth = frame.depth_m.copy()
+    rows = np.nonzero((gt > 0).any(axis=1))[0]
+    wall = slice(0, max(rows.min() - 15, 40))  # the rows above every object
+    depth[wall] = 1.6  # a vertical surface far behind the table: not on the plane
+    rng = np.random.default_rng(3)
+    for _ in range(25):  # blob-shaped dropouts, as big as a small glass
+        y = rng.integers(0, wall.stop)
+        x = rng.integers(0, depth.shape[1])
+        yy, xx = np.ogrid[:depth.shape[0], :depth.shape[1]]
+        blob = (yy - y) ** 2 + (xx - x) ** 2 < rng.integers(8, 18) ** 2
+        depth[blob & (yy < wall.stop)] = 0
+    segmenter = Segmenter(SegmentConfig(), PlaneConfig())
+    inst = segmenter(fid, frame.rgb, depth, frame.camera.K)
+    on_wall = [o for o in inst.objects if (inst.ids[wall] == o["id"]).sum()
+               > 0.5 * (inst.ids == o["id"]).sum()]
+    assert on_wall == []
+    found = instance_ious(inst.ids, gt)
+    assert np.mean([v > 0.5 for v in found.values()]) >= 0.5
+    # without the table-footprint gate the wall's holes do come out as objects
+    monkeypatch.setattr(training_free, "ON_TABLE_SHARE", 0.0)
+    ungated = segmenter(fid, frame.rgb, depth, frame.camera.K)
+    assert len(ungated.objects) > len(inst.objects)
+
+
 def test_import_splits_binary_masks_and_keeps_ids(tmp_path):
     binary = np.zeros((20, 30), np.uint8)
     binary[2:6, 2:8] = 255

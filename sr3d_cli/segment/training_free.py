@@ -28,6 +28,9 @@ from sr3d_cli.geometry.camera import depth_to_points
 from sr3d_cli.geometry.plane import Plane
 
 
+ON_TABLE_SHARE = 0.3  # least share of a candidate over the table's footprint
+
+
 @dataclass
 class Candidate:
     """mask : (H, W) bool; score : share of the region backed by depth evidence, in [0, 1]."""
@@ -92,13 +95,29 @@ def table_noise_model(rough: np.ndarray, depth_m: np.ndarray, on_table: np.ndarr
     return model.astype(np.float32)
 
 
+def table_footprint(on_table: np.ndarray) -> np.ndarray:
+    """``(H, W) bool``: the convex hull of the largest connected patch of table readings, the
+    image region where the table (and so anything standing on it) can be. Holes beyond it (a
+    white wall, the floor, the far room) are sensor dropouts, not glass."""
+    patch = cv2.morphologyEx(on_table.astype(np.uint8), cv2.MORPH_OPEN, _disk(2))
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(patch, 8)
+    out = np.zeros(on_table.shape, np.uint8)
+    if count < 2:
+        return np.ones(on_table.shape, bool)
+    biggest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    ys, xs = np.nonzero(labels == biggest)
+    hull = cv2.convexHull(np.column_stack([xs, ys]).astype(np.int32))
+    cv2.fillConvexPoly(out, hull, 1)
+    return out > 0
+
+
 def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_factor: float,
-                  max_object_share: float) -> tuple[np.ndarray, np.ndarray]:
-    """Glass evidence and opaque evidence, both ``(H, W) bool``.
+                  max_object_share: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Glass evidence, opaque evidence and the table's footprint, all ``(H, W) bool``.
 
     Glass: holes where the table should be seen, and readings above the table that are
     ``rough_factor`` times rougher than the table at that depth. Opaque: smooth readings
-    clearly above the table.
+    clearly above the table. Footprint: :func:`table_footprint`.
     """
     valid = depth_m > 0
     plane_z = plane.depth_image(depth_m.shape, K)
@@ -113,7 +132,7 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     glass = holes | (above & is_rough)
     opaque = above & ~is_rough
     opaque = cv2.morphologyEx(opaque.astype(np.uint8), cv2.MORPH_OPEN, _disk(2)) > 0
-    return glass, opaque
+    return glass, opaque, table_footprint(on_table)
 
 
 def find_candidates(glass: np.ndarray, opaque: np.ndarray, *, min_area: int,
@@ -170,9 +189,12 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     rgb : (H, W, 3) uint8; depth_m : (H, W) metres (0 = none); K : (3, 3); plane : the table.
     Returns candidates sorted by area (largest first); masks do not overlap.
     """
-    glass, opaque = evidence_maps(depth_m, K, plane, rough_factor=rough_factor,
-                                  max_object_share=max_object_share)
+    glass, opaque, footprint = evidence_maps(depth_m, K, plane, rough_factor=rough_factor,
+                                             max_object_share=max_object_share)
     pieces = find_candidates(glass, opaque, min_area=min_area // 4, close_radius=close_radius)
+    # an object stands on the table: most of a candidate lies over the table's footprint (a
+    # glass at the far edge may rise above it in the image, so not all of it)
+    pieces = [p for p in pieces if (p & footprint).sum() >= ON_TABLE_SHARE * p.sum()]
     if grabcut_iterations > 0:
         pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
     out = []
