@@ -223,15 +223,27 @@ class Planner:
         L, H = g.finger_length, g.finger_height
         local_t = to_local(R, c, target.points)                  # (F, M, 3)
         local_n = target.normals.astype(np.float32) @ R.astype(np.float32)
-        local_s = to_local(R, c, scene.points)
+        # only points that some depth's finger slab can hold matter: pack them to the front of
+        # each row and cut the rows to the longest such list (same result, less work)
+        m = cfg.collision_margin
+        can = (np.abs(local_t[..., 2]) < H / 2 + m) & \
+            (local_t[..., 0] > min(cfg.depths) - L - m) & (local_t[..., 0] < max(cfg.depths) + m)
+        keep = max(int(can.sum(axis=1).max()), 1)
+        order = np.argsort(~can, axis=1, kind="stable")[:, :keep]
+        local_t = np.take_along_axis(local_t, order[..., None], 1)
+        local_n = np.take_along_axis(local_n, order[..., None], 1)
+        can = np.take_along_axis(can, order, 1)
+        # scene points in each frame, computed for a frame only once it reaches the collision test
+        local_s = np.empty((len(R), len(scene.points), 3), np.float32)
+        placed = np.zeros(len(R), bool)
         down = -plane.normal
         approach_up = np.clip(R[:, :, 0] @ down, 0, 1)
         best = np.full(len(R), -1.0)
         out = np.zeros((len(R), 4))                               # width, depth, ymid, score
         for depth in sorted(cfg.depths, reverse=True):
             x, y, z = local_t[..., 0], local_t[..., 1], local_t[..., 2]
-            m = cfg.collision_margin  # the section under the (inflated) finger pads
-            slab = (x > depth - L - m) & (x < depth + m) & (np.abs(z) < H / 2 + m)
+            # the section under the (inflated) finger pads
+            slab = can & (x > depth - L - m) & (x < depth + m) & (np.abs(z) < H / 2 + m)
             slab &= self._between_jaws(y, slab, span)
             count = slab.sum(axis=1)
             y_lo = np.where(slab, y, np.inf).min(axis=1)
@@ -262,7 +274,10 @@ class Planner:
             idx = np.flatnonzero(ok)                              # collisions: survivors only
             dd = np.full(len(idx), depth)
             boxes = g.boxes(width[idx], dd)                       # (f, 3, 2, 3)
-            shifted = local_s[idx].copy()
+            fresh = idx[~placed[idx]]
+            local_s[fresh] = to_local(R[fresh], c[fresh], scene.points)
+            placed[fresh] = True
+            shifted = local_s[idx]
             shifted[..., 1] -= ymid[idx, None]
             hits = count_inside(shifted, boxes, shrink=-cfg.collision_margin).max(axis=1)
             centre = c[idx] + R[idx, :, 1] * ymid[idx, None]
