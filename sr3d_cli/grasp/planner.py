@@ -221,18 +221,21 @@ class Planner:
         table; both contacts lie inside the friction cone."""
         cfg, g = self.cfg, self.gripper
         L, H = g.finger_length, g.finger_height
-        local_t = to_local(R, c, target.points)                  # (F, M, 3)
-        local_n = target.normals.astype(np.float32) @ R.astype(np.float32)
-        # only points that some depth's finger slab can hold matter: pack them to the front of
-        # each row and cut the rows to the longest such list (same result, less work)
+        # only points that some depth's finger slab can hold matter: find them from their
+        # approach (x) and height (z) coordinates, pack them to the front of each row, cut the
+        # rows to the longest such list, and take full grasp-frame coordinates of those alone
         m = cfg.collision_margin
-        can = (np.abs(local_t[..., 2]) < H / 2 + m) & \
-            (local_t[..., 0] > min(cfg.depths) - L - m) & (local_t[..., 0] < max(cfg.depths) + m)
+        pts, c32 = target.points.astype(np.float32), c.astype(np.float32)[:, None]
+        Rxz = R[:, :, [0, 2]].astype(np.float32)                  # (F, 3, 2)
+        xz = pts @ Rxz - c32 @ Rxz                                # (F, M, 2)
+        can = (np.abs(xz[..., 1]) < H / 2 + m) & \
+            (xz[..., 0] > min(cfg.depths) - L - m) & (xz[..., 0] < max(cfg.depths) + m)
         keep = max(int(can.sum(axis=1).max()), 1)
-        order = np.argsort(~can, axis=1, kind="stable")[:, :keep]
-        local_t = np.take_along_axis(local_t, order[..., None], 1)
-        local_n = np.take_along_axis(local_n, order[..., None], 1)
+        order = np.argsort(~can, axis=1, kind="stable")[:, :keep]  # (F, K)
         can = np.take_along_axis(can, order, 1)
+        R32 = R.astype(np.float32)
+        local_t = (pts[order] - c32) @ R32                        # (F, K, 3)
+        local_n = target.normals.astype(np.float32)[order] @ R32
         # scene points in each frame, computed for a frame only once it reaches the collision test
         local_s = np.empty((len(R), len(scene.points), 3), np.float32)
         placed = np.zeros(len(R), bool)
