@@ -65,13 +65,21 @@ def count_inside(local: np.ndarray, boxes: np.ndarray, shrink: float = 0.0) -> n
     """Points inside each box. local : (F, M, 3) grasp-frame points; boxes : (F, B, 2, 3).
     Returns (F, B) counts."""
     counts = np.zeros(boxes.shape[:2], dtype=np.int64)
-    for b in range(boxes.shape[1]):
-        inside = np.ones(local.shape[:2], dtype=bool)
-        for axis in range(3):
+    slabs: dict[tuple, np.ndarray] = {}  # the fingers share their x and z extents: test once
+
+    def between(axis, lo, hi):
+        key = (axis, lo.tobytes(), hi.tobytes())
+        if key not in slabs:
             v = local[..., axis]
-            inside &= (v > boxes[:, b, None, 0, axis] + shrink) & \
-                (v < boxes[:, b, None, 1, axis] - shrink)
-        counts[:, b] = inside.sum(axis=1)
+            slabs[key] = (v > lo[:, None] + shrink) & (v < hi[:, None] - shrink)
+        return slabs[key]
+
+    for b in range(boxes.shape[1]):
+        lo, hi = boxes[:, b, 0], boxes[:, b, 1]
+        key = ("xz", lo[:, ::2].tobytes(), hi[:, ::2].tobytes())
+        if key not in slabs:
+            slabs[key] = between(0, lo[:, 0], hi[:, 0]) & between(2, lo[:, 2], hi[:, 2])
+        counts[:, b] = (slabs[key] & between(1, lo[:, 1], hi[:, 1])).sum(axis=1)
     return counts
 
 
