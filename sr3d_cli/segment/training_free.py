@@ -101,12 +101,12 @@ def table_footprint(on_table: np.ndarray) -> np.ndarray:
     white wall, the floor, the far room) are sensor dropouts, not glass."""
     patch = cv2.morphologyEx(on_table.astype(np.uint8), cv2.MORPH_OPEN, _disk(2))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(patch, 8)
-    out = np.zeros(on_table.shape, np.uint8)
-    if count < 2:
+    if count < 2:  # no table seen: no footprint to gate by
         return np.ones(on_table.shape, bool)
     biggest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     ys, xs = np.nonzero(labels == biggest)
     hull = cv2.convexHull(np.column_stack([xs, ys]).astype(np.int32))
+    out = np.zeros(on_table.shape, np.uint8)
     cv2.fillConvexPoly(out, hull, 1)
     return out > 0
 
