@@ -94,6 +94,7 @@ class AlignConfig:
     hint_accept: float = 0.9
     refine: bool = True
     refine_evals: int = 80
+    refine_hint: bool = False
     window: int = 160
 
 

@@ -336,7 +336,10 @@ class Aligner:
             for _total, prior, group, i, R, s0, t0, view in batch():
                 if group == "hint":
                     diag = {"seed": "reconstruction pose"}
-                    R, t, scale = refine(R, t0, s0)
+                    if cfg.refine_hint:
+                        R, t, scale = refine(R, t0, s0)
+                    else:
+                        t, scale = t0, s0
                 elif plain:
                     scale, t, diag = self._keypoints_paper(R, s0, t0, down, depth_m)
                 else:
