@@ -95,6 +95,12 @@ class AlignConfig:
     refine: bool = True
     refine_evals: int = 80
     refine_hint: bool = False
+    use_depth: bool = True
+    depth_inlier: float = 0.01
+    depth_min_share: float = 0.05
+    depth_min_points: int = 30
+    depth_samples: int = 400
+    depth_max_change: float = 0.03
     window: int = 160
 
 

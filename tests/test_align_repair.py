@@ -69,6 +69,30 @@ def test_align_recovers_a_seeded_random_pose(seed):
     assert len(placed.diagnostics["contact_points"]) >= 10
 
 
+def test_raw_depth_on_the_glass_corrects_the_distance():
+    """A placement 2% too far and too large (same silhouette): front-surface readings on a third
+    of the mask, see-through readings (the table, far behind) on another third, holes elsewhere.
+    The readings on the object pull it back to within 0.3%; see-through readings alone do not."""
+    plane, T, scale, mask, raw, gt = _scene(12)
+    aligner = Aligner(AlignConfig())
+    aligner.K, aligner.verts, aligner.faces = K, BOTTLE.vertices, np.asarray(BOTTLE.faces)
+    rng = np.random.default_rng(5)
+    ys, xs = np.nonzero(mask)
+    part = rng.integers(0, 3, len(xs))
+    sensor = raw.copy()
+    sensor[ys[part == 0], xs[part == 0]] = gt[ys[part == 0], xs[part == 0]] + \
+        rng.normal(0, 0.004, (part == 0).sum())
+    sensor[ys[part == 1], xs[part == 1]] = gt[ys[part == 1], xs[part == 1]] + 0.1
+    factor, info = aligner._depth_correction(T[:3, :3], 1.02 * T[:3, 3], 1.02 * scale, mask,
+                                             sensor)
+    assert abs(1.02 * factor - 1) < 0.003
+    assert info["raw_inliers"] > 100
+    sensor[ys[part == 0], xs[part == 0]] = 0
+    factor, info = aligner._depth_correction(T[:3, :3], 1.02 * T[:3, 3], 1.02 * scale, mask,
+                                             sensor)
+    assert factor == 1.0 and info["raw_inliers"] < info["raw_points"] * 0.1
+
+
 def test_paper_mode_runs_the_plain_method():
     plane, T, scale, mask, raw, _ = _scene(11)
     placed = Aligner(AlignConfig(mode="paper", views=42, rolls=4))(BOTTLE, mask, K, plane, raw)

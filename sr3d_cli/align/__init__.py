@@ -18,7 +18,7 @@ import numpy as np
 import trimesh
 from scipy.optimize import minimize
 
-from sr3d_cli.align.silhouette import fill_silhouette, project_mesh
+from sr3d_cli.align.silhouette import fill_silhouette, front_triangles, project_mesh
 from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candidates_sphere,
                                           is_axisymmetric)
 from sr3d_cli.config import AlignConfig
@@ -250,6 +250,42 @@ class Aligner:
             step = step / 3
         return pose(x)
 
+    # ---- raw depth on the object ----------------------------------------------------------------
+    def _depth_correction(self, R, t, scale, mask, depth_m) -> tuple[float, dict]:
+        """Factor ``f`` for a similarity about the camera centre (``t *= f``, ``scale *= f``),
+        which leaves the silhouette unchanged, that brings the placed model's front surface onto
+        the raw depth readings lying on it: readings within ``depth_inlier`` of the model,
+        a robust median of their ratio, iterated. Glass gives few such readings (most are holes
+        or see-through); with fewer than ``depth_min_share`` of the mask, nothing changes."""
+        cfg = self.cfg
+        ys, xs = np.nonzero(mask & (depth_m > 0))
+        info = {"raw_points": int(len(xs)), "raw_inliers": 0, "depth_factor": 1.0}
+        need = max(cfg.depth_min_points, cfg.depth_min_share * int(mask.sum()))  # inliers
+        if len(xs) < need:
+            return 1.0, info
+        sampled = np.linspace(0, len(xs) - 1, min(len(xs), cfg.depth_samples)).astype(np.int64)
+        need *= len(sampled) / len(xs)  # in sampled readings
+        ys, xs = ys[sampled], xs[sampled]
+        uv, pts = project_mesh(self.verts, R, t, scale, self.K)
+        seen = front_triangles(uv, pts[:, 2], self.faces, mask.shape)[ys, xs]
+        hit = seen >= 0
+        # exact depth where each pixel's ray meets the plane of the triangle it sees
+        a, b, c = (pts[self.faces[seen[hit]]][:, j] for j in range(3))
+        normal = np.cross(b - a, c - a)
+        rays = _ray(np.column_stack([xs[hit], ys[hit]]).astype(np.float64), self.K)
+        z_model = np.full(len(xs), np.nan)
+        z_model[hit] = np.einsum("ij,ij->i", normal, a) / np.einsum("ij,ij->i", normal, rays)
+        hit &= np.isfinite(z_model) & (z_model > 0)
+        raw, z_model = depth_m[ys, xs].astype(np.float64)[hit], z_model[hit]
+        factor, inliers = 1.0, np.zeros(len(raw), bool)
+        for _ in range(3):
+            inliers = np.abs(raw - factor * z_model) < cfg.depth_inlier
+            if inliers.sum() < need:
+                return 1.0, {**info, "raw_inliers": int(inliers.sum())}
+            factor = float(np.clip(np.median(raw[inliers] / z_model[inliers]),
+                                   1 - cfg.depth_max_change, 1 + cfg.depth_max_change))
+        return factor, {**info, "raw_inliers": int(inliers.sum()), "depth_factor": round(factor, 5)}
+
     # ---- the whole placement ----------------------------------------------------------------
     def __call__(self, mesh: trimesh.Trimesh, mask: np.ndarray, K: np.ndarray,
                  plane: Plane | None, depth_m: np.ndarray,
@@ -354,6 +390,10 @@ class Aligner:
         if best is None:
             raise AlignError("no candidate orientation could be matched to the contact edge")
         _, iou, i, R, t, scale, view, diag = best
+        if cfg.use_depth and not plain:
+            factor, info = self._depth_correction(R, t, scale, mask, depth_m)
+            t, scale = np.asarray(t, dtype=np.float64) * factor, scale * factor
+            diag = {**diag, **info}
         scores = {"view": round(view.total, 4), "ssim": round(view.ssim, 4),
                   "edges": round(view.edges, 4), "aspect": round(view.aspect, 4),
                   "silhouette_iou": round(iou, 4)}

@@ -33,26 +33,47 @@ def window_K(K: np.ndarray, origin: tuple[float, float], zoom: float) -> np.ndar
     return Kw
 
 
+def _facing(tri: np.ndarray) -> np.ndarray:
+    """Which projected triangles ``(m, 3, 2)`` face the camera. Faces wind counter-clockwise
+    seen from outside; with the image's y axis pointing down, that is a negative cross product."""
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    return (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) < 0
+
+
 def fill_silhouette(uv: np.ndarray, faces: np.ndarray, shape: tuple[int, int],
                     origin: tuple[float, float] = (0.0, 0.0), zoom: float = 1.0) -> np.ndarray:
     """Silhouette ``shape bool`` of triangles ``faces (m, 3)`` over pixels ``uv (n, 2)``,
     drawn in a window whose top-left pixel is ``origin``, magnified by ``zoom``.
 
     Triangles are filled one by one: a single ``cv2.fillPoly`` call treats overlapping
-    polygons as holes (even-odd rule). Back-facing triangles are skipped (closed meshes)."""
+    polygons as holes (even-odd rule). Either half of a closed mesh covers its silhouette; the
+    far half is drawn (the pose search was tuned with it)."""
     pix = (uv - np.asarray(origin)) * zoom
     tri = pix[faces]
-    tri = tri[np.isfinite(tri).all(axis=(1, 2))]
-    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    # counter-clockwise from outside; the image's y axis points down, so front faces have
-    # a positive cross product here
-    tri = tri[(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) > 0]
+    tri = tri[np.isfinite(tri).all(axis=(1, 2)) & ~_facing(tri)]
     limit = 4.0 * max(shape)  # far-off vertices only slow the filling down
     tris = np.rint(np.clip(tri, -limit, limit) * 4).astype(np.int32)  # 2 sub-pixel bits
     out = np.zeros(shape, np.uint8)
     for t in tris:
         cv2.fillConvexPoly(out, t, 1, lineType=cv2.LINE_8, shift=2)
     return out > 0
+
+
+def front_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
+                    shape: tuple[int, int]) -> np.ndarray:
+    """Index ``(H, W) int32`` of the triangle seen at each pixel (-1: none), drawn far to near
+    (painter's order by mean depth), front faces only. ``uv (n, 2)`` pixels and ``depth (n,)``
+    of the vertices; pixels are the image's own (no window)."""
+    tri = uv[faces]
+    front = np.isfinite(tri).all(axis=(1, 2)) & _facing(tri)
+    index = np.flatnonzero(front)
+    index = index[np.argsort(-depth[faces[index]].mean(axis=1), kind="stable")]
+    limit = 4.0 * max(shape)
+    tris = np.rint(np.clip(tri[index], -limit, limit) * 4).astype(np.int32)
+    out = np.full(shape, -1, np.int32)
+    for k, t in zip(index, tris):
+        cv2.fillConvexPoly(out, t, int(k), lineType=cv2.LINE_8, shift=2)
+    return out
 
 
 def crop_square(mask: np.ndarray, size: int) -> np.ndarray:
