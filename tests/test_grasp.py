@@ -12,6 +12,7 @@ from click.testing import CliRunner
 from sr3d_cli.cli import cli
 from sr3d_cli.config import Config
 from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.geometry.raycast import first_hits
 from sr3d_cli.grasp import GraspSet
 from sr3d_cli.grasp.gripper import Gripper
@@ -94,6 +95,48 @@ def test_object_wider_than_the_gripper_gets_no_grasp():
     grasps, messages = _plan(wide)
     assert len(grasps) == 0
     assert messages and "0.080 m opening" in messages[0]
+
+
+def _beaker(radius: float = 0.05, height: float = 0.1, wall: float = 0.002) -> trimesh.Trimesh:
+    """An open thin-walled vessel standing on the table (z up in its own frame)."""
+    outer = [(0, 0), (radius, 0), (radius, height)]
+    return _on_table(revolve(open_vessel(outer, wall, 0.004), 96))
+
+
+def test_vessel_wider_than_the_gripper_is_pinched_at_the_rim():
+    """10 cm across, 8 cm opening: only the 2 mm wall can be held, fingers either side of it."""
+    beaker = _beaker()
+    grasps, messages = _plan(beaker)
+    assert not messages and len(grasps) >= 3
+    rim_z = TABLE_Z - 0.1
+    for i in range(len(grasps)):
+        assert grasps.widths[i] < 0.02
+        radial = grasps.t[i][:2] / np.linalg.norm(grasps.t[i][:2])
+        assert abs(grasps.R[i][:2, 1] @ radial) > 0.9, "closes across the wall"
+        assert grasps.t[i][2] < rim_z + 0.03  # near the rim (camera z grows downwards)
+    records = judge(grasps, _truth([beaker]), GRIPPER)
+    summary = summarise(grasps, records, [1], friction=0.5)
+    assert summary["top1"] == {"1": True}
+    assert summary["top10_success"] >= 0.8
+
+
+def test_evaluator_holds_a_wall_between_flat_pads():
+    """A rim pinch by hand: on a 3 cm radius the inner pad touches the concave wall along its
+    two edges only (the middle is 1.3 mm off), which together hold; the same pads closing across
+    a box's diagonal (edge contacts, face normals 45 degrees off the line) still need friction 1."""
+    beaker = _beaker(radius=0.03)
+    R = np.stack([[0, 0, 1.0], [1.0, 0, 0], [0, -1.0, 0]], axis=1)  # approach down, close x
+    x_wall = 0.03 - 0.001
+    row = np.concatenate([[1.0, 0.016, 0.02, 0.02], R.ravel(), [x_wall, 0, TABLE_Z - 0.09], [1]])
+    rim = judge(GraspSet.from_array(row[None]), _truth([beaker]), GRIPPER)[0]
+    assert rim["reason"] == "ok" and rim["mu"] < 0.5  # each edge alone: mu 13
+    box = _on_table(trimesh.creation.box(extents=(0.04, 0.04, 0.08)))
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    turn = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    row = np.concatenate([[1.0, 0.07, 0.02, 0.02], (turn @ R).ravel(),
+                          [0, 0, TABLE_Z - 0.06], [1]])
+    diagonal = judge(GraspSet.from_array(row[None]), _truth([box]), GRIPPER)[0]
+    assert diagonal["reason"] == "ok" and 0.9 < diagonal["mu"] < 1.1
 
 
 def _hand_grasp(width: float, centre_height: float, depth: float) -> GraspSet:

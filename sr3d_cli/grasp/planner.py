@@ -168,7 +168,12 @@ class Planner:
         distinct = j_near != j_far
         p = np.concatenate([s[has], s[has][distinct]])
         q = target.points[np.concatenate([j_far, j_near[distinct]])]
+        # across the whole object the pair's own line closes the jaws; across a thin wall the
+        # pair is too close for its line (up to pair_radius off the normal) to mean anything,
+        # so the jaws close along the two surfaces' normals
         y = _unit(p - q)
+        thin = len(j_far) + np.arange(int(distinct.sum()))
+        y[thin] = _unit(n[has][distinct] - target.normals[j_near[distinct]])
         mid = (p + q) / 2
         down = -plane.normal
         a0 = down - (y @ down)[:, None] * y
@@ -258,8 +263,10 @@ class Planner:
             ymid = np.where(ok, (y_hi + y_lo) / 2, 0.0)
             width = np.where(ok, width, g.max_width)
             # contact normals: the outermost slab points on each side
-            left = slab & (y < y_lo[:, None] + cfg.contact_band)
-            right = slab & (y > y_hi[:, None] - cfg.contact_band)
+            # (of surfaces facing each finger: across a thin wall, the inner surface's points
+            # lie in the band too, facing the other way)
+            left = slab & (y < y_lo[:, None] + cfg.contact_band) & (local_n[..., 1] < 0)
+            right = slab & (y > y_hi[:, None] - cfg.contact_band) & (local_n[..., 1] > 0)
             n_left = _unit((left[:, None].astype(np.float32) @ local_n)[:, 0])
             n_right = _unit((right[:, None].astype(np.float32) @ local_n)[:, 0])
             # the line between the two contact patches (their centroids)

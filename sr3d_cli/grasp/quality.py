@@ -97,9 +97,17 @@ def _contact(origins: np.ndarray, direction: np.ndarray, truth: TrueScene, width
 
 
 def closure_angle(p_l, n_l, p_r, n_r) -> float:
-    """Smallest over contact pairs of the larger angle between a contact's inward normal and
-    the line to the other contact (radians); force closure at friction mu iff tan(angle) <= mu.
+    """The larger angle between a contact's inward normal and the line to the other contact
+    (radians); force closure at friction mu iff tan(angle) <= mu. Best over pairs of contacts,
+    where a contact is a patch point with its normal, or the patch's centroid with any of the
+    patch's normals: a flat pad pressed on a concave surface (the inside of a glass's wall)
+    touches along its two edges, whose forces meet between them, although neither edge alone
+    faces the other finger's contact. Normals stay the surface's own, so an edge or a corner
+    is not made any easier to hold.
     p_*, n_* : (p, 3) patch points and outward normals of the left and right finger."""
+    p_l = np.vstack([p_l, np.broadcast_to(p_l.mean(0), p_l.shape)])
+    p_r = np.vstack([p_r, np.broadcast_to(p_r.mean(0), p_r.shape)])
+    n_l, n_r = np.vstack([n_l, n_l]), np.vstack([n_r, n_r])
     line = p_r[None] - p_l[:, None]                               # (l, r, 3)
     norm = np.linalg.norm(line, axis=-1)
     line = line / np.maximum(norm, 1e-12)[..., None]
