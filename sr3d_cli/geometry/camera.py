@@ -104,27 +104,27 @@ def pixel_rays(shape: tuple[int, int], K: np.ndarray) -> np.ndarray:
     return np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones((h, w))], axis=-1)
 
 
-def depth_normals(points: np.ndarray, step: int = 2, max_jump: float = 0.02) -> np.ndarray:
-    """Unit surface normals ``(H, W, 3)`` of a point image (from :func:`depth_to_points`),
-    facing the camera; 0 where a neighbour ``step`` pixels away is empty or further than
-    ``max_jump`` metres in depth (an occluding edge)."""
-    z = points[..., 2]
-    valid = z > 0
+def depth_normals(points: np.ndarray, step: int = 2, max_jump: float = 0.02,
+                  stride: int = 1) -> np.ndarray:
+    """Unit surface normals of a point image (from :func:`depth_to_points`), facing the camera;
+    0 where a neighbour ``step`` pixels away is empty or further than ``max_jump`` metres in
+    depth (an occluding edge). Returned for every ``stride``-th pixel of each row and column:
+    ``(ceil(H / stride), ceil(W / stride), 3)``."""
+    h, w = points.shape[:2]
     pad = np.pad(points, ((step, step), (step, step), (0, 0)))
-    vpad = np.pad(valid, step)
-    h, w = z.shape
-    right = pad[step:step + h, 2 * step:]
-    left = pad[step:step + h, :w]
-    down = pad[2 * step:, step:step + w]
-    up = pad[:h, step:step + w]
+
+    def at(dy, dx):  # the point image shifted by (dy, dx), at the strided pixels
+        return pad[step + dy:step + dy + h:stride, step + dx:step + dx + w:stride]
+
+    centre, right, left, down, up = at(0, 0), at(0, step), at(0, -step), at(step, 0), at(-step, 0)
+    z = centre[..., 2]
     n = np.cross(right - left, down - up)
-    ok = valid & vpad[step:step + h, 2 * step:] & vpad[step:step + h, :w] \
-        & vpad[2 * step:, step:step + w] & vpad[:h, step:step + w]
+    ok = z > 0
     for nb in (right, left, down, up):
-        ok &= np.abs(nb[..., 2] - z) <= max_jump
+        ok &= (nb[..., 2] > 0) & (np.abs(nb[..., 2] - z) <= max_jump)
     norm = np.linalg.norm(n, axis=-1)
     ok &= norm > 0
     n = np.where(ok[..., None], n / np.where(norm > 0, norm, 1)[..., None], 0.0)
-    flip = np.einsum("hwk,hwk->hw", n, points) > 0  # must face the camera (against the ray)
+    flip = np.einsum("hwk,hwk->hw", n, centre) > 0  # must face the camera (against the ray)
     n[flip] *= -1
     return n

@@ -48,9 +48,9 @@ class Cloud:
 def depth_cloud(depth_m: np.ndarray, K: np.ndarray, ids: np.ndarray, stride: int = 1) -> Cloud:
     """Every ``stride``-th valid pixel of a depth map, normals from the depth, labels from ids."""
     pts = depth_to_points(np.where(np.isfinite(depth_m), depth_m, 0.0), K)
-    nrm = depth_normals(pts)
+    nrm = depth_normals(pts, stride=stride)
     sl = (slice(None, None, stride), slice(None, None, stride))
-    pts, nrm, lab = pts[sl], nrm[sl], ids[sl]
+    pts, lab = pts[sl], ids[sl]
     ok = pts[..., 2] > 0
     return Cloud(pts[ok], nrm[ok], lab[ok].astype(np.int64))
 
