@@ -90,6 +90,48 @@ def test_dropouts_beyond_the_table_are_not_objects(synth_set, monkeypatch):
     assert len(ungated.objects) > len(inst.objects)
 
 
+def _silhouettes(placements):
+    """Instance ids of solids of revolution standing on a table seen from 55 degrees.
+    placements: (profile, height m, x m, y m on the table)."""
+    from sr3d_cli.geometry.camera import Camera
+    from sr3d_cli.geometry.plane import Plane
+    from sr3d_cli.geometry.revolution import revolve
+    from sr3d_cli.render import RenderMesh, make_renderer
+
+    K = np.array([[610.0, 0, 319.5], [0, 610, 239.5], [0, 0, 1]])
+    e = np.radians(55)
+    up = np.array([0.0, -np.cos(e), -np.sin(e)])  # table normal, towards the camera
+    plane = Plane(up, float(-up @ np.array([0, 0, 0.6])))
+    centre = plane.intersect(np.array([0.0, 0.0, 1.0]))
+    x_dir = np.array([1.0, 0, 0])
+    y_dir = np.cross(up, x_dir)
+    R = np.stack([x_dir, np.cross(up, x_dir), up], 1)
+    meshes = []
+    for k, (profile, height, x, y) in enumerate(placements, start=1):
+        m = revolve(np.asarray(profile) / height)
+        base = centre + x * x_dir + y * y_dir
+        meshes.append(RenderMesh(m.vertices @ (height * R).T + base, np.asarray(m.faces), k))
+    ids = make_renderer("numpy").render(meshes, Camera(K, 640, 480)).ids
+    return ids, K, plane
+
+
+def test_touching_glasses_are_split_but_a_goblet_is_not():
+    from sr3d_cli.segment.training_free import _parts_fit_better, split_touching
+
+    glass = [[0, 0], [0.03, 0], [0.033, 0.1], [0, 0.1]]
+    ids, K, plane = _silhouettes([(glass, 0.1, -0.032, 0.0), (glass, 0.1, 0.034, 0.01)])
+    region = ids > 0
+    parts = split_touching(region)
+    assert len(parts) == 2 and _parts_fit_better(region, parts, K, plane)
+    ious = instance_ious(np.argmax(np.stack([np.zeros_like(region)] + parts), 0), ids)
+    assert min(ious.values()) > 0.9
+    goblet = [[0, 0], [0.035, 0], [0.033, 0.004], [0.005, 0.01], [0.005, 0.07], [0.03, 0.09],
+              [0.04, 0.13], [0.036, 0.16], [0, 0.16]]
+    ids, K, plane = _silhouettes([(goblet, 0.16, 0.0, 0.0)])
+    parts = split_touching(ids > 0)
+    assert len(parts) == 1 or not _parts_fit_better(ids > 0, parts, K, plane)
+
+
 def test_import_splits_binary_masks_and_keeps_ids(tmp_path):
     binary = np.zeros((20, 30), np.uint8)
     binary[2:6, 2:8] = 255

@@ -13,7 +13,10 @@ The steps:
    outline of holes around a see-through object), opening to drop thin artefacts such as the
    dropouts along opaque edges, and an area floor;
 5. each candidate refined by GrabCut in a window around it (colour edges), seeded with the
-   evidence as probable foreground and the opaque pixels as background.
+   evidence as probable foreground and the opaque pixels as background;
+6. a region of touching objects split at its narrow necks (distance-transform watershed), kept
+   split only where solids of revolution on the table explain the parts clearly better than the
+   whole (the revolution fit of :mod:`sr3d_cli.reconstruct.revolution_fit`).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from sr3d_cli.geometry.plane import Plane
 
 
 ON_TABLE_SHARE = 0.3  # least share of a candidate over the table's footprint
+SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (_parts_fit_better)
 
 
 @dataclass
@@ -198,10 +202,96 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     if grabcut_iterations > 0:
         pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
     out = []
-    for mask in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
-        if mask.sum() >= min_area:
-            out.append(Candidate(mask, float(glass[mask].mean())))
+    for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
+        parts = split_touching(region)
+        if len(parts) > 1 and not _parts_fit_better(region, parts, K, plane):
+            parts = [region]
+        for mask in parts:
+            if mask.sum() >= min_area:
+                out.append(Candidate(mask, float(glass[mask].mean())))
     return sorted(out, key=lambda c: -int(c.mask.sum()))
+
+
+def split_touching(mask: np.ndarray, *, neck_ratio: float = 0.5, min_share: float = 0.2
+                   ) -> list[np.ndarray]:
+    """Split a region made of touching objects at its narrow necks: a watershed of the distance
+    to the region's edge, seeded at its maxima; two neighbouring parts stay together unless the
+    widest point of the boundary between them is narrower than ``neck_ratio`` times the smaller
+    part's own widest point (a bottle's neck is as wide as the boundary it meets, two glasses
+    side by side are not), and parts under ``min_share`` of the region (a goblet's foot behind
+    its stem) join the neighbour they share most boundary with."""
+    from skimage.feature import peak_local_max
+    from skimage.segmentation import watershed
+
+    dt = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
+    top = float(dt.max())
+    if top < 3:
+        return [mask]
+    peaks = peak_local_max(dt, min_distance=max(3, int(top / 2)), threshold_abs=0.3 * top,
+                           labels=mask.astype(np.int32), exclude_border=False)
+    if len(peaks) < 2:
+        return [mask]
+    markers = np.zeros(mask.shape, np.int32)
+    markers[tuple(peaks.T)] = np.arange(1, len(peaks) + 1)
+    labels = watershed(-dt, markers, mask=mask, watershed_line=False)
+    n = len(peaks)
+    # boundary strength between neighbouring parts: the widest point on their shared edge
+    saddle = np.zeros((n + 1, n + 1))
+    length = np.zeros((n + 1, n + 1))
+    for a, b, d in ((labels[:, :-1], labels[:, 1:], np.minimum(dt[:, :-1], dt[:, 1:])),
+                    (labels[:-1], labels[1:], np.minimum(dt[:-1], dt[1:]))):
+        edge = (a != b) & (a > 0) & (b > 0)
+        np.maximum.at(saddle, (a[edge], b[edge]), d[edge])
+        np.add.at(length, (a[edge], b[edge]), 1)
+    saddle = np.maximum(saddle, saddle.T)
+    length = length + length.T
+    peak = np.zeros(n + 1)
+    np.maximum.at(peak, labels[mask], dt[mask])
+    parent = list(range(n + 1))
+
+    def root(i):
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for i in range(1, n + 1):
+        for j in range(i + 1, n + 1):
+            if length[i, j] and saddle[i, j] >= neck_ratio * min(peak[i], peak[j]):
+                parent[root(j)] = root(i)
+    groups = np.array([root(i) for i in range(n + 1)])[labels]
+    area = mask.sum()
+    while True:
+        ids, counts = np.unique(groups[mask], return_counts=True)
+        small = ids[counts < min_share * area]
+        if len(ids) < 2 or len(small) == 0:
+            break
+        g = small[np.argmin(counts[np.isin(ids, small)])]
+        members = [i for i in range(1, n + 1) if groups[tuple(peaks[i - 1])] == g]
+        others = [i for i in range(1, n + 1) if i not in members]
+        shared = {groups[tuple(peaks[j - 1])]: 0.0 for j in others}
+        for i in members:
+            for j in others:
+                shared[groups[tuple(peaks[j - 1])]] += length[i, j]
+        target = max(shared, key=shared.get)
+        groups[groups == g] = target
+    return [groups == k for k in np.unique(groups[mask])]
+
+
+def _parts_fit_better(region: np.ndarray, parts: list[np.ndarray], K: np.ndarray,
+                      plane: Plane) -> bool:
+    """Keep a split only where solids of revolution on the table explain the parts clearly
+    better than one explains the whole: every part's silhouette IoU above the whole's, and
+    their area-weighted mean at least ``SPLIT_GAIN`` above it (two glasses side by side, not a
+    goblet's bowl and foot)."""
+    from sr3d_cli.reconstruct.revolution_fit import fit_revolution
+
+    try:
+        whole = fit_revolution(region, K, plane).iou
+        fits = [fit_revolution(p, K, plane).iou for p in parts]
+    except ValueError:  # a part that cannot stand or lie on the table
+        return False
+    areas = [int(p.sum()) for p in parts]
+    return min(fits) > whole and float(np.average(fits, weights=areas)) >= whole + SPLIT_GAIN
 
 
 def merge_pieces(pieces: list[np.ndarray], shape: tuple[int, int], *, radius: int
