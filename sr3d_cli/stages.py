@@ -175,6 +175,17 @@ def load_poses(source: SceneSource, frame_id: str) -> list[dict]:
         raise InputError(path, f"cannot read poses ({exc})") from None
 
 
+def _aligned_plane(source: SceneSource, frame_id: str) -> Plane | None:
+    """The table ``align`` placed this frame's objects on (poses/<id>.json), if recorded."""
+    path = source.stage_file("poses", frame_id, (".json",))
+    if path is None:
+        return None
+    try:
+        return Plane.from_json(json.loads(path.read_text(encoding="utf-8"))["plane"])
+    except (OSError, ValueError, KeyError, TypeError):  # unreadable, or no table was found
+        return None
+
+
 def depth_suffix(source: SceneSource, frame_id: str) -> str:
     """Repaired depth keeps the input's encoding (PNG with depth_scale, EXR or npy metres)."""
     suffix = source.depth_path(frame_id).suffix.lower()
@@ -207,9 +218,11 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
             raise ValueError("no objects in masks/")
         depth = frame.depth_m if depth_source == "raw" else \
             _read_prediction(source, "repaired", fid, frame.depth_m.shape)
-        plane, why = frame_plane(frame, ids, plane_cfg)
+        plane = _aligned_plane(source, fid) if depth_source == "repaired" else None
         if plane is None:
-            raise ValueError(why)
+            plane, why = frame_plane(frame, ids, plane_cfg)
+            if plane is None:
+                raise ValueError(why)
         scene = depth_cloud(depth, K, ids, cfg.stride)
         targets = {int(k): scene.select(scene.labels == k) for k in np.unique(ids) if k > 0}
         if depth_source == "repaired":

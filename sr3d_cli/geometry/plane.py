@@ -56,6 +56,11 @@ class Plane:
         return {"normal": self.normal.tolist(), "offset": float(self.offset),
                 "inlier_share": float(self.inlier_share)}
 
+    @classmethod
+    def from_json(cls, doc: dict) -> "Plane":
+        return cls(np.asarray(doc["normal"], dtype=np.float64), float(doc["offset"]),
+                   float(doc.get("inlier_share", 1.0)))
+
 
 def _orient(normal: np.ndarray, offset: float) -> tuple[np.ndarray, float]:
     norm = np.linalg.norm(normal)
