@@ -258,23 +258,18 @@ def split_touching(mask: np.ndarray, *, neck_ratio: float = 0.5, min_share: floa
         for j in range(i + 1, n + 1):
             if length[i, j] and saddle[i, j] >= neck_ratio * min(peak[i], peak[j]):
                 parent[root(j)] = root(i)
-    groups = np.array([root(i) for i in range(n + 1)])[labels]
+    group = np.array([root(i) for i in range(n + 1)])  # of each watershed part (0: outside)
     area = mask.sum()
     while True:
-        ids, counts = np.unique(groups[mask], return_counts=True)
+        ids, counts = np.unique(group[labels[mask]], return_counts=True)
         small = ids[counts < min_share * area]
         if len(ids) < 2 or len(small) == 0:
             break
         g = small[np.argmin(counts[np.isin(ids, small)])]
-        members = [i for i in range(1, n + 1) if groups[tuple(peaks[i - 1])] == g]
-        others = [i for i in range(1, n + 1) if i not in members]
-        shared = {groups[tuple(peaks[j - 1])]: 0.0 for j in others}
-        for i in members:
-            for j in others:
-                shared[groups[tuple(peaks[j - 1])]] += length[i, j]
-        target = max(shared, key=shared.get)
-        groups[groups == g] = target
-    return [groups == k for k in np.unique(groups[mask])]
+        shared = length[group == g].sum(axis=0)  # boundary with every part
+        totals = {h: shared[group == h].sum() for h in ids if h != g}
+        group[group == g] = max(totals, key=totals.get)
+    return [mask & (group[labels] == k) for k in np.unique(group[labels[mask]])]
 
 
 def _parts_fit_better(region: np.ndarray, parts: list[np.ndarray], K: np.ndarray,
