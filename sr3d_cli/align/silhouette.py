@@ -40,6 +40,16 @@ def _facing(tri: np.ndarray) -> np.ndarray:
     return (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) < 0
 
 
+def _fill(out: np.ndarray, tri: np.ndarray, values) -> np.ndarray:
+    """Fill triangles ``tri (m, 3, 2)`` (pixels) into ``out`` one by one, in order, each with
+    its value from ``values``; returns ``out``."""
+    limit = 4.0 * max(out.shape)  # far-off vertices only slow the filling down
+    tris = np.rint(np.clip(tri, -limit, limit) * 4).astype(np.int32)  # 2 sub-pixel bits
+    for t, v in zip(tris, values):
+        cv2.fillConvexPoly(out, t, int(v), lineType=cv2.LINE_8, shift=2)
+    return out
+
+
 def fill_silhouette(uv: np.ndarray, faces: np.ndarray, shape: tuple[int, int],
                     origin: tuple[float, float] = (0.0, 0.0), zoom: float = 1.0) -> np.ndarray:
     """Silhouette ``shape bool`` of triangles ``faces (m, 3)`` over pixels ``uv (n, 2)``,
@@ -51,12 +61,7 @@ def fill_silhouette(uv: np.ndarray, faces: np.ndarray, shape: tuple[int, int],
     pix = (uv - np.asarray(origin)) * zoom
     tri = pix[faces]
     tri = tri[np.isfinite(tri).all(axis=(1, 2)) & ~_facing(tri)]
-    limit = 4.0 * max(shape)  # far-off vertices only slow the filling down
-    tris = np.rint(np.clip(tri, -limit, limit) * 4).astype(np.int32)  # 2 sub-pixel bits
-    out = np.zeros(shape, np.uint8)
-    for t in tris:
-        cv2.fillConvexPoly(out, t, 1, lineType=cv2.LINE_8, shift=2)
-    return out > 0
+    return _fill(np.zeros(shape, np.uint8), tri, np.ones(len(tri))) > 0
 
 
 def front_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
@@ -68,12 +73,7 @@ def front_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     front = np.isfinite(tri).all(axis=(1, 2)) & _facing(tri)
     index = np.flatnonzero(front)
     index = index[np.argsort(-depth[faces[index]].mean(axis=1), kind="stable")]
-    limit = 4.0 * max(shape)
-    tris = np.rint(np.clip(tri[index], -limit, limit) * 4).astype(np.int32)
-    out = np.full(shape, -1, np.int32)
-    for k, t in zip(index, tris):
-        cv2.fillConvexPoly(out, t, int(k), lineType=cv2.LINE_8, shift=2)
-    return out
+    return _fill(np.full(shape, -1, np.int32), tri[index], index)
 
 
 def crop_square(mask: np.ndarray, size: int) -> np.ndarray:
