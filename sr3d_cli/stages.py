@@ -164,26 +164,20 @@ def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
     return objects, messages
 
 
-def load_poses(source: SceneSource, frame_id: str) -> list[dict]:
+def load_pose_document(source: SceneSource, frame_id: str) -> dict:
+    """poses/<id>.json as written by :func:`align_frame` (objects, failed, plane)."""
     path = source.stage_file("poses", frame_id, (".json",))
     if path is None:
         raise InputError(source.out / "poses" / f"{frame_id}.json",
                          "no poses: run `sr3d align` first")
     try:
-        return json.loads(path.read_text(encoding="utf-8")).get("objects", [])
+        return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise InputError(path, f"cannot read poses ({exc})") from None
 
 
-def _aligned_plane(source: SceneSource, frame_id: str) -> Plane | None:
-    """The table ``align`` placed this frame's objects on (poses/<id>.json), if recorded."""
-    path = source.stage_file("poses", frame_id, (".json",))
-    if path is None:
-        return None
-    try:
-        return Plane.from_json(json.loads(path.read_text(encoding="utf-8"))["plane"])
-    except (OSError, ValueError, KeyError, TypeError):  # unreadable, or no table was found
-        return None
+def load_poses(source: SceneSource, frame_id: str) -> list[dict]:
+    return load_pose_document(source, frame_id).get("objects", [])
 
 
 def depth_suffix(source: SceneSource, frame_id: str) -> str:
@@ -218,7 +212,9 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
             raise ValueError("no objects in masks/")
         depth = frame.depth_m if depth_source == "raw" else \
             _read_prediction(source, "repaired", fid, frame.depth_m.shape)
-        plane = _aligned_plane(source, fid) if depth_source == "repaired" else None
+        poses = load_pose_document(source, fid) if depth_source == "repaired" else {}
+        # the table align placed the objects on, else (raw depth, or none recorded) a fresh fit
+        plane = Plane.from_json(poses["plane"]) if poses.get("plane") else None
         if plane is None:
             plane, why = frame_plane(frame, ids, plane_cfg)
             if plane is None:
@@ -227,7 +223,7 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
         targets = {int(k): scene.select(scene.labels == k) for k in np.unique(ids) if k > 0}
         if depth_source == "repaired":
             placed = []
-            for obj in load_poses(source, fid):
+            for obj in poses.get("objects", []):
                 k = int(obj["id"])
                 mesh = load_mesh(find_mesh(source, fid, k))
                 targets[k] = mesh_cloud(mesh, np.asarray(obj["T_cam_obj"]), float(obj["scale"]),
