@@ -108,7 +108,7 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
             if plane is None and reconstructor.cfg.backend != "onnx":
                 raise ValueError(why)
             result = reconstructor(frame.rgb, ids == k, frame.camera.K, plane,
-                                   record.get("label", ""))
+                                   record.get("label", ""), frame.depth_m)
         except ValueError as exc:  # ObjectError, and model/fit failures of this object
             messages.append(f"object {k}: {exc}")
             continue

@@ -9,12 +9,14 @@ import pytest
 import trimesh
 from click.testing import CliRunner
 
+from sr3d_cli.align.silhouette import project_mesh, surface_depth
 from sr3d_cli.cli import cli
 from sr3d_cli.config import IOConfig, ReconstructConfig
 from sr3d_cli.errors import InputError
 from sr3d_cli.evaluate import chamfer_distance
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import profile_from_mesh, revolve, silhouette
+from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_mask
 from sr3d_cli.reconstruct.revolution_fit import fit_revolution
@@ -68,6 +70,46 @@ def test_lying_bottle_recovered_with_its_base_at_the_wide_end():
     assert fit.axis @ axis > 0  # base at the wide end
     truth = revolve(prof / 0.22)
     assert chamfer_distance(revolve(fit.profile), truth) < 0.05
+
+
+def _steep_bottle_frame(x: float):
+    """A 20 cm bottle standing under a camera looking down at 72 deg, its mask and raw depth:
+    30% true front-surface readings (2 mm noise), 30% see-through readings of the table."""
+    plane = _table(72.0, 0.5)
+    base = plane.intersect(np.array([x, 0.12, 1.0]))
+    h = 0.2
+    prof = np.array([[0, 0], [0.032, 0], [0.032, 0.13], [0.012, 0.17], [0.012, h], [0, h]])
+    mask = _render(prof, base, plane.normal)
+    n = plane.normal
+    side = np.cross([1.0, 0, 0], n)
+    side /= np.linalg.norm(side)
+    T = make_T(np.stack([side, np.cross(n, side), n], axis=1), base)
+    mesh = revolve(prof / h)
+    uv, pts = project_mesh(np.asarray(mesh.vertices), T[:3, :3], T[:3, 3], h, K)
+    ys, xs = np.nonzero(mask)
+    front = surface_depth(uv, pts, np.asarray(mesh.faces), K, xs, ys, mask.shape)
+    table = plane.depth_image(mask.shape, K)[ys, xs]
+    rng = np.random.default_rng(3)
+    kind = rng.uniform(size=len(xs))
+    depth = np.zeros(mask.shape, np.float32)
+    depth[ys, xs] = np.where(kind < 0.3, front + rng.normal(0, 0.002, len(xs)),
+                             np.where(kind < 0.6, table, 0))
+    see_through = np.zeros_like(depth)
+    see_through[ys, xs] = np.where(kind < 0.6, table, 0)
+    return plane, mask, np.nan_to_num(depth), see_through, h
+
+
+@pytest.mark.parametrize("x", [-0.05, 0.0])
+def test_raw_depth_tells_a_standing_bottle_from_a_lying_one_seen_from_above(x):
+    plane, mask, depth, see_through, h = _steep_bottle_frame(x)
+    # from above, a short lying cylinder draws the bottle's outline better
+    assert fit_revolution(mask, K, plane).resting == "lying"
+    # readings on the glass say how far up its surface is
+    fit = fit_revolution(mask, K, plane, depth=depth)
+    assert fit.resting == "standing"
+    assert fit.height == pytest.approx(h, rel=0.1)
+    # see-through readings lie on the table and carry no vote
+    assert fit_revolution(mask, K, plane, depth=see_through).resting == "lying"
 
 
 def test_shape_error_on_generated_glassware(synth_set):

@@ -18,7 +18,7 @@ import numpy as np
 import trimesh
 from scipy.optimize import minimize
 
-from sr3d_cli.align.silhouette import fill_silhouette, front_triangles, project_mesh
+from sr3d_cli.align.silhouette import fill_silhouette, project_mesh, surface_depth
 from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candidates_sphere,
                                           is_axisymmetric)
 from sr3d_cli.config import AlignConfig
@@ -267,15 +267,8 @@ class Aligner:
         need *= len(sampled) / len(xs)  # in sampled readings
         ys, xs = ys[sampled], xs[sampled]
         uv, pts = project_mesh(self.verts, R, t, scale, self.K)
-        seen = front_triangles(uv, pts[:, 2], self.faces, mask.shape)[ys, xs]
-        hit = seen >= 0
-        # exact depth where each pixel's ray meets the plane of the triangle it sees
-        a, b, c = (pts[self.faces[seen[hit]]][:, j] for j in range(3))
-        normal = np.cross(b - a, c - a)
-        rays = _ray(np.column_stack([xs[hit], ys[hit]]).astype(np.float64), self.K)
-        z_model = np.full(len(xs), np.nan)
-        z_model[hit] = np.einsum("ij,ij->i", normal, a) / np.einsum("ij,ij->i", normal, rays)
-        hit &= np.isfinite(z_model) & (z_model > 0)
+        z_model = surface_depth(uv, pts, self.faces, self.K, xs, ys, mask.shape)
+        hit = np.isfinite(z_model)
         raw, z_model = depth_m[ys, xs].astype(np.float64)[hit], z_model[hit]
         factor, inliers = 1.0, np.zeros(len(raw), bool)
         for _ in range(3):

@@ -76,6 +76,24 @@ def front_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     return _fill(np.full(shape, -1, np.int32), tri[index], index)
 
 
+def surface_depth(uv: np.ndarray, pts: np.ndarray, faces: np.ndarray, K: np.ndarray,
+                  xs: np.ndarray, ys: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Depth ``(n,)`` of a mesh's nearest front surface at pixels ``(xs, ys)`` (NaN: none), exact
+    where each pixel's ray meets the plane of the triangle it sees. ``uv`` and ``pts`` come from
+    :func:`project_mesh`."""
+    seen = front_triangles(uv, pts[:, 2], faces, shape)[ys, xs]
+    hit = seen >= 0
+    a, b, c = (pts[faces[seen[hit]]][:, j] for j in range(3))
+    normal = np.cross(b - a, c - a)
+    rays = np.column_stack([(xs[hit] - K[0, 2]) / K[0, 0], (ys[hit] - K[1, 2]) / K[1, 1],
+                            np.ones(int(hit.sum()))])
+    z = np.full(len(xs), np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z[hit] = np.einsum("ij,ij->i", normal, a) / np.einsum("ij,ij->i", normal, rays)
+    z[~(z > 0)] = np.nan
+    return z
+
+
 def crop_square(mask: np.ndarray, size: int) -> np.ndarray:
     """The mask's bounding box, centred in a ``size`` x ``size`` float32 image (aspect kept)."""
     ys, xs = np.nonzero(mask)

@@ -20,9 +20,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from sr3d_cli.align.silhouette import project_mesh, surface_depth
 from sr3d_cli.geometry.camera import project
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.revolution import silhouette
+from sr3d_cli.geometry.revolution import revolve, silhouette
 from sr3d_cli.geometry.transforms import make_T, rotation_about
 
 
@@ -250,10 +251,56 @@ def _init_lying(mask, K, plane, levels) -> _Model | None:
     return _Model(e1, axis, max(length, 1e-3), np.full(levels, r))
 
 
+def _result(model: _Model, resting: str, iou: float) -> RevolutionFit:
+    radii, base, axis = model.radii, model.base, model.axis
+    if resting == "lying":
+        tail = max(2, len(radii) // 8)
+        if radii[-tail:].mean() > radii[:tail].mean():  # the wider end is the base
+            base, axis, radii = base + model.height * axis, -axis, radii[::-1]
+    z = np.linspace(0, 1, len(radii))
+    r = radii / model.height
+    profile = np.vstack([[0.0, 0.0], np.column_stack([r, z]), [0.0, 1.0]])
+    return RevolutionFit(profile, base, axis, model.height, resting, iou)
+
+
+def _off_table_readings(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, plane: Plane,
+                        band: float, samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixels (xs, ys) and raw depth of readings in the mask that are not on the table (those are
+    see-through readings), at most ``samples`` of them, evenly spread."""
+    ys, xs = np.nonzero(mask & (depth > 0))
+    z = depth[ys, xs].astype(np.float64)
+    pts = np.column_stack([(xs - K[0, 2]) / K[0, 0] * z, (ys - K[1, 2]) / K[1, 1] * z, z])
+    keep = plane.height(pts) > band
+    xs, ys, z = xs[keep], ys[keep], z[keep]
+    pick = np.linspace(0, len(xs) - 1, min(len(xs), samples)).astype(np.int64)
+    return xs[pick], ys[pick], z[pick]
+
+
+def raw_support(fit: RevolutionFit, xs: np.ndarray, ys: np.ndarray, raw: np.ndarray,
+                K: np.ndarray, shape: tuple[int, int], band: float) -> int:
+    """How many raw readings lie within ``band`` metres of the fitted solid's front surface."""
+    if len(xs) == 0:
+        return 0
+    mesh = revolve(fit.profile, 24)
+    T = fit.T_cam_obj
+    uv, pts = project_mesh(np.asarray(mesh.vertices), T[:3, :3], T[:3, 3], fit.height, K)
+    z = surface_depth(uv, pts, np.asarray(mesh.faces), K, xs, ys, shape)
+    return int((np.abs(z - raw) < band).sum())
+
+
 def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int = 40,
                    iterations: int = 12, lying_margin: float = 0.03,
-                   allow_lying: bool = True) -> RevolutionFit:
+                   allow_lying: bool = True, depth: np.ndarray | None = None,
+                   depth_band: float = 0.01, depth_min_points: int = 30,
+                   depth_vote: float = 2.0, vote_iou_gap: float = 0.06) -> RevolutionFit:
     """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
+
+    Standing and lying are both fitted; the better silhouette wins, lying only by
+    ``lying_margin`` IoU. Seen from above, a tall standing bottle and a short lying one can draw
+    nearly the same outline; with raw ``depth (H, W)`` metres given, the hypothesis on whose
+    front surface ``depth_vote`` times more off-table readings lie (within ``depth_band``, at
+    least ``depth_min_points``) wins instead, if its silhouette IoU is within ``vote_iou_gap`` of
+    the other's (a mask of two merged objects fits neither well; there the outline decides).
 
     Raises ValueError when neither hypothesis can be set up (e.g. the mask is above the horizon).
     """
@@ -265,16 +312,16 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         if model is None:
             continue
         model, iou = _fit(model, mask, K, plane, resting, iterations)
-        fits.append((iou + (lying_margin if resting == "standing" else 0.0), iou, resting, model))
+        fits.append((iou + (lying_margin if resting == "standing" else 0.0),
+                     _result(model, resting, iou)))
     if not fits:
         raise ValueError("the mask does not meet the support plane: cannot place an object")
-    _, iou, resting, model = max(fits, key=lambda f: f[0])
-    radii, base, axis = model.radii, model.base, model.axis
-    if resting == "lying":
-        tail = max(2, len(radii) // 8)
-        if radii[-tail:].mean() > radii[:tail].mean():  # the wider end is the base
-            base, axis, radii = base + model.height * axis, -axis, radii[::-1]
-    z = np.linspace(0, 1, len(radii))
-    r = radii / model.height
-    profile = np.vstack([[0.0, 0.0], np.column_stack([r, z]), [0.0, 1.0]])
-    return RevolutionFit(profile, base, axis, model.height, resting, iou)
+    best = max(fits, key=lambda f: f[0])[1]
+    if depth is not None and len(fits) == 2:
+        xs, ys, raw = _off_table_readings(mask, depth, K, plane, depth_band, 400)
+        support = [raw_support(f, xs, ys, raw, K, mask.shape, depth_band) for _, f in fits]
+        lo, hi = sorted(support)
+        close = abs(fits[0][1].iou - fits[1][1].iou) <= vote_iou_gap
+        if close and hi >= depth_min_points and hi >= depth_vote * lo:
+            best = fits[int(np.argmax(support))][1]
+    return best
