@@ -224,7 +224,8 @@ def mesh_bench(synth: Path) -> dict:
     """Issue 3's measures. Segmentation (default backend): mean instance IoU and detection rate
     (IoU > 0.5) on the synthetic set and on the real frames against their given masks.
     Reconstruction (default backend, ground-truth masks and support plane): symmetric Chamfer
-    distance / object height against the true mesh, both at unit height, standing and lying."""
+    distance / object height against the true mesh, both at unit height, standing and lying
+    (the fit as the default config runs it, raw depth voting between standing and lying)."""
     import trimesh
 
     from sr3d_cli.config import PlaneConfig, ReconstructConfig, SegmentConfig
@@ -255,8 +256,11 @@ def mesh_bench(synth: Path) -> dict:
                                       exclude=gt > 0)
                 for obj in objects["objects"]:
                     try:
-                        check_mask(gt == obj["id"], ReconstructConfig())
-                        fit = fit_revolution(gt == obj["id"], frame.camera.K, plane)
+                        rc = ReconstructConfig()
+                        check_mask(gt == obj["id"], rc)
+                        fit = fit_revolution(gt == obj["id"], frame.camera.K, plane,
+                                             depth=frame.depth_m if rc.use_depth else None,
+                                             depth_vote=rc.depth_vote)
                     except ObjectError:
                         continue  # cut by the border or too small: not a shape measurement
                     truth = profile_from_mesh(trimesh.load(source.root / obj["mesh"]))
