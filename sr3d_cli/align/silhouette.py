@@ -9,6 +9,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from sr3d_cli.geometry.camera import unproject
 from sr3d_cli.geometry.transforms import place_points
 
 
@@ -85,8 +86,7 @@ def surface_depth(uv: np.ndarray, pts: np.ndarray, faces: np.ndarray, K: np.ndar
     hit = seen >= 0
     a, b, c = (pts[faces[seen[hit]]][:, j] for j in range(3))
     normal = np.cross(b - a, c - a)
-    rays = np.column_stack([(xs[hit] - K[0, 2]) / K[0, 0], (ys[hit] - K[1, 2]) / K[1, 1],
-                            np.ones(int(hit.sum()))])
+    rays = unproject(np.column_stack([xs[hit], ys[hit]]), np.ones(int(hit.sum())), K)
     z = np.full(len(xs), np.nan)
     with np.errstate(divide="ignore", invalid="ignore"):
         z[hit] = np.einsum("ij,ij->i", normal, a) / np.einsum("ij,ij->i", normal, rays)

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from sr3d_cli.align.silhouette import project_mesh, surface_depth
-from sr3d_cli.geometry.camera import project
+from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import revolve, silhouette
 from sr3d_cli.geometry.transforms import make_T, rotation_about
@@ -265,11 +265,11 @@ def _result(model: _Model, resting: str, iou: float) -> RevolutionFit:
 
 def _off_table_readings(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, plane: Plane,
                         band: float, samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pixels (xs, ys) and raw depth of readings in the mask that are not on the table (those are
-    see-through readings), at most ``samples`` of them, evenly spread."""
+    """Pixels (xs, ys) and raw depth of the mask's readings more than ``band`` above the table
+    (those on it are see-through readings), at most ``samples`` of them, evenly spread."""
     ys, xs = np.nonzero(mask & (depth > 0))
     z = depth[ys, xs].astype(np.float64)
-    pts = np.column_stack([(xs - K[0, 2]) / K[0, 0] * z, (ys - K[1, 2]) / K[1, 1] * z, z])
+    pts = unproject(np.column_stack([xs, ys]).astype(np.float64), z, K)
     keep = plane.height(pts) > band
     xs, ys, z = xs[keep], ys[keep], z[keep]
     pick = np.linspace(0, len(xs) - 1, min(len(xs), samples)).astype(np.int64)
