@@ -103,6 +103,9 @@ class AlignConfig:
     depth_min_points: int = 30
     depth_samples: int = 400
     depth_max_change: float = 0.03
+    depth_search: float = 0.25
+    depth_vote: float = 2.0
+    depth_agree: float = 0.5
     window: int = 160
 
 

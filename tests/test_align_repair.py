@@ -69,9 +69,15 @@ def test_align_recovers_a_seeded_random_pose(seed):
     assert len(placed.diagnostics["contact_points"]) >= 10
 
 
+def _table_depth(plane: Plane, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """Depth of the table along the rays of pixels (what a see-through reading measures)."""
+    rays = np.column_stack([(xs - K[0, 2]) / K[0, 0], (ys - K[1, 2]) / K[1, 1], np.ones(len(xs))])
+    return plane.intersect(rays)[:, 2]
+
+
 def test_raw_depth_on_the_glass_corrects_the_distance():
     """A placement 2% too far and too large (same silhouette): front-surface readings on a third
-    of the mask, see-through readings (the table, far behind) on another third, holes elsewhere.
+    of the mask, see-through readings (the table behind) on another third, holes elsewhere.
     The readings on the object pull it back to within 0.3%; see-through readings alone do not."""
     plane, T, scale, mask, raw, gt = _scene(12)
     aligner = Aligner(AlignConfig())
@@ -82,15 +88,43 @@ def test_raw_depth_on_the_glass_corrects_the_distance():
     sensor = raw.copy()
     sensor[ys[part == 0], xs[part == 0]] = gt[ys[part == 0], xs[part == 0]] + \
         rng.normal(0, 0.004, (part == 0).sum())
-    sensor[ys[part == 1], xs[part == 1]] = gt[ys[part == 1], xs[part == 1]] + 0.1
+    sensor[ys[part == 1], xs[part == 1]] = _table_depth(plane, xs[part == 1], ys[part == 1])
+    assert np.median(sensor[ys[part == 1], xs[part == 1]] - gt[ys[part == 1], xs[part == 1]]) > 0.02
     factor, info = aligner._depth_correction(T[:3, :3], 1.02 * T[:3, 3], 1.02 * scale, mask,
-                                             sensor)
+                                             sensor, plane)
     assert abs(1.02 * factor - 1) < 0.003
     assert info["raw_inliers"] > 100
     sensor[ys[part == 0], xs[part == 0]] = 0
     factor, info = aligner._depth_correction(T[:3, :3], 1.02 * T[:3, 3], 1.02 * scale, mask,
-                                             sensor)
+                                             sensor, plane)
     assert factor == 1.0 and info["raw_inliers"] < info["raw_points"] * 0.1
+
+
+def test_readings_find_an_object_placed_far_too_far():
+    """Hidden contact edge: the placement is 15% too far, so no reading lies near its surface.
+    The factors within align.depth_search vote and the object comes back to within 0.5%; when
+    the readings lie on three different surfaces (no one factor explains most of them), or the
+    search is off, the placement stays."""
+    plane, T, scale, mask, raw, gt = _scene(13)
+    rng = np.random.default_rng(6)
+    ys, xs = np.nonzero(mask)
+    part = rng.integers(0, 3, len(xs))
+    sensor = raw.copy()
+    on = part < 2
+    sensor[ys[on], xs[on]] = gt[ys[on], xs[on]] + rng.normal(0, 0.003, on.sum())
+    f = 1.15
+
+    def correct(cfg: AlignConfig, depth: np.ndarray) -> float:
+        aligner = Aligner(cfg)
+        aligner.K, aligner.verts, aligner.faces = K, BOTTLE.vertices, np.asarray(BOTTLE.faces)
+        return aligner._depth_correction(T[:3, :3], f * T[:3, 3], f * scale, mask, depth,
+                                         plane)[0]
+
+    assert abs(f * correct(AlignConfig(), sensor) - 1) < 0.005
+    assert correct(AlignConfig(depth_search=0.0), sensor) == 1.0
+    for k, surface in enumerate((0.94, 0.88, 0.82)):  # readings spread over three surfaces
+        sensor[ys[part == k], xs[part == k]] = f * surface * gt[ys[part == k], xs[part == k]]
+    assert correct(AlignConfig(), sensor) == 1.0
 
 
 def test_paper_mode_runs_the_plain_method():

@@ -22,7 +22,7 @@ from sr3d_cli.align.silhouette import fill_silhouette, project_mesh, surface_dep
 from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candidates_sphere,
                                           is_axisymmetric)
 from sr3d_cli.config import AlignConfig
-from sr3d_cli.geometry.camera import project
+from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import make_T, rotation_about
 
@@ -251,12 +251,20 @@ class Aligner:
         return pose(x)
 
     # ---- raw depth on the object ----------------------------------------------------------------
-    def _depth_correction(self, R, t, scale, mask, depth_m) -> tuple[float, dict]:
+    def _depth_correction(self, R, t, scale, mask, depth_m, plane) -> tuple[float, dict]:
         """Factor ``f`` for a similarity about the camera centre (``t *= f``, ``scale *= f``),
         which leaves the silhouette unchanged, that brings the placed model's front surface onto
         the raw depth readings lying on it: readings within ``depth_inlier`` of the model,
         a robust median of their ratio, iterated. Glass gives few such readings (most are holes
-        or see-through); with fewer than ``depth_min_share`` of the mask, nothing changes."""
+        or see-through); with fewer than ``depth_min_share`` of the mask, nothing changes.
+
+        When the contact edge was wrong (hidden behind another object, or the height of a
+        bottle seen from above), the model can be 10-20% too far; then no reading lies near it.
+        So first the factors within ``depth_search`` vote (readings more than ``depth_inlier``
+        above the table only: see-through readings on the table would vote for "farther"); a
+        factor wins if ``depth_vote`` times more readings lie on its surface than on the
+        placed one's, and they are at least ``depth_agree`` of the off-table readings (a mask
+        of two merged objects, or a wrong shape, has readings that no one factor explains)."""
         cfg = self.cfg
         ys, xs = np.nonzero(mask & (depth_m > 0))
         info = {"raw_points": int(len(xs)), "raw_inliers": 0, "depth_factor": 1.0}
@@ -270,14 +278,34 @@ class Aligner:
         z_model = surface_depth(uv, pts, self.faces, self.K, xs, ys, mask.shape)
         hit = np.isfinite(z_model)
         raw, z_model = depth_m[ys, xs].astype(np.float64)[hit], z_model[hit]
-        factor, inliers = 1.0, np.zeros(len(raw), bool)
+        start = self._depth_vote(raw, z_model, np.column_stack([xs, ys])[hit], plane, need)
+        lo, hi = start * (1 - cfg.depth_max_change), start * (1 + cfg.depth_max_change)
+        factor, inliers = start, np.zeros(len(raw), bool)
         for _ in range(3):
             inliers = np.abs(raw - factor * z_model) < cfg.depth_inlier
             if inliers.sum() < need:
                 return 1.0, {**info, "raw_inliers": int(inliers.sum())}
-            factor = float(np.clip(np.median(raw[inliers] / z_model[inliers]),
-                                   1 - cfg.depth_max_change, 1 + cfg.depth_max_change))
+            factor = float(np.clip(np.median(raw[inliers] / z_model[inliers]), lo, hi))
         return factor, {**info, "raw_inliers": int(inliers.sum()), "depth_factor": round(factor, 5)}
+
+    def _depth_vote(self, raw, z_model, px, plane, need) -> float:
+        """The factor within ``depth_search`` on whose surface most off-table readings lie, if
+        it beats the placed surface (factor 1) ``depth_vote`` times over and holds
+        ``depth_agree`` of them; else 1."""
+        cfg = self.cfg
+        if cfg.depth_search <= cfg.depth_max_change:
+            return 1.0
+        off = plane.height(unproject(px.astype(np.float64), raw, self.K)) > cfg.depth_inlier
+        raw, z_model = raw[off], z_model[off]
+        steps = int(np.ceil(cfg.depth_search / 0.005))  # factors 0.5% apart
+        factors = 1 + np.linspace(-cfg.depth_search, cfg.depth_search, 2 * steps + 1)
+        votes = (np.abs(raw[:, None] - factors[None] * z_model[:, None])
+                 < cfg.depth_inlier).sum(0)
+        best = int(np.argmax(votes))
+        if votes[best] >= need and votes[best] >= cfg.depth_vote * max(votes[steps], 1) and \
+                votes[best] >= cfg.depth_agree * len(raw):
+            return float(factors[best])
+        return 1.0
 
     # ---- the whole placement ----------------------------------------------------------------
     def __call__(self, mesh: trimesh.Trimesh, mask: np.ndarray, K: np.ndarray,
@@ -384,7 +412,7 @@ class Aligner:
             raise AlignError("no candidate orientation could be matched to the contact edge")
         _, iou, i, R, t, scale, view, diag = best
         if cfg.use_depth and not plain:
-            factor, info = self._depth_correction(R, t, scale, mask, depth_m)
+            factor, info = self._depth_correction(R, t, scale, mask, depth_m, plane)
             t, scale = np.asarray(t, dtype=np.float64) * factor, scale * factor
             diag = {**diag, **info}
         scores = {"view": round(view.total, 4), "ssim": round(view.ssim, 4),
