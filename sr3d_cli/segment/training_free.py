@@ -32,7 +32,7 @@ from sr3d_cli.geometry.plane import Plane
 
 
 ON_TABLE_SHARE = 0.3  # least share of a candidate over the table's footprint
-SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (_parts_fit_better)
+SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (split_touching)
 
 
 @dataclass
@@ -203,90 +203,115 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
         pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
     out = []
     for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
-        parts = split_touching(region)
-        if len(parts) > 1 and not _parts_fit_better(region, parts, K, plane):
-            parts = [region]
-        for mask in parts:
+        for mask in split_touching(region, K, plane):
             if mask.sum() >= min_area:
                 out.append(Candidate(mask, float(glass[mask].mean())))
     return sorted(out, key=lambda c: -int(c.mask.sum()))
 
 
-def split_touching(mask: np.ndarray, *, neck_ratio: float = 0.5, min_share: float = 0.2
-                   ) -> list[np.ndarray]:
-    """Split a region made of touching objects at its narrow necks: a watershed of the distance
-    to the region's edge, seeded at its maxima; two neighbouring parts stay together unless the
-    widest point of the boundary between them is narrower than ``neck_ratio`` times the smaller
-    part's own widest point (a bottle's neck is as wide as the boundary it meets, two glasses
-    side by side are not), and parts under ``min_share`` of the region (a goblet's foot behind
-    its stem) join the neighbour they share most boundary with."""
+def _pieces(mask: np.ndarray, max_pieces: int) -> tuple[np.ndarray, int, np.ndarray]:
+    """Watershed of the distance to a region's edge, seeded at its maxima: labels (H, W) int
+    (0 outside), the number of pieces and their shared boundary lengths (n+1, n+1). The
+    smallest piece joins the neighbour it shares most boundary with until ``max_pieces`` are
+    left (a goblet's foot or a bottle's neck is small; two touching objects are not)."""
     from skimage.feature import peak_local_max
     from skimage.segmentation import watershed
 
     dt = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, 5)
     top = float(dt.max())
     if top < 3:
-        return [mask]
+        return mask.astype(np.int32), 1, np.zeros((2, 2))
     peaks = peak_local_max(dt, min_distance=max(3, int(top / 2)), threshold_abs=0.3 * top,
                            labels=mask.astype(np.int32), exclude_border=False)
     if len(peaks) < 2:
-        return [mask]
+        return mask.astype(np.int32), 1, np.zeros((2, 2))
     markers = np.zeros(mask.shape, np.int32)
     markers[tuple(peaks.T)] = np.arange(1, len(peaks) + 1)
     labels = watershed(-dt, markers, mask=mask, watershed_line=False)
     n = len(peaks)
-    # boundary strength between neighbouring parts: the widest point on their shared edge
-    saddle = np.zeros((n + 1, n + 1))
     length = np.zeros((n + 1, n + 1))
-    for a, b, d in ((labels[:, :-1], labels[:, 1:], np.minimum(dt[:, :-1], dt[:, 1:])),
-                    (labels[:-1], labels[1:], np.minimum(dt[:-1], dt[1:]))):
+    for a, b in ((labels[:, :-1], labels[:, 1:]), (labels[:-1], labels[1:])):
         edge = (a != b) & (a > 0) & (b > 0)
-        np.maximum.at(saddle, (a[edge], b[edge]), d[edge])
         np.add.at(length, (a[edge], b[edge]), 1)
-    saddle = np.maximum(saddle, saddle.T)
     length = length + length.T
-    peak = np.zeros(n + 1)
-    np.maximum.at(peak, labels[mask], dt[mask])
-    parent = list(range(n + 1))
-
-    def root(i):
-        while parent[i] != i:
-            i = parent[i]
-        return i
-
-    for i in range(1, n + 1):
-        for j in range(i + 1, n + 1):
-            if length[i, j] and saddle[i, j] >= neck_ratio * min(peak[i], peak[j]):
-                parent[root(j)] = root(i)
-    group = np.array([root(i) for i in range(n + 1)])  # of each watershed part (0: outside)
-    area = mask.sum()
-    while True:
-        ids, counts = np.unique(group[labels[mask]], return_counts=True)
-        small = ids[counts < min_share * area]
-        if len(ids) < 2 or len(small) == 0:
-            break
-        g = small[np.argmin(counts[np.isin(ids, small)])]
-        shared = length[group == g].sum(axis=0)  # boundary with every part
-        totals = {h: shared[group == h].sum() for h in ids if h != g}
-        group[group == g] = max(totals, key=totals.get)
-    return [mask & (group[labels] == k) for k in np.unique(group[labels[mask]])]
+    area = np.bincount(labels.ravel(), minlength=n + 1).astype(np.float64)
+    area[0] = np.inf
+    while n > max_pieces:
+        small = int(np.argmin(area))
+        into = int(np.argmax(length[small]))
+        labels[labels == small] = into
+        area[into] += area[small]
+        length[into] += length[small]
+        length[:, into] += length[:, small]
+        length[into, into] = 0
+        length[small], length[:, small], area[small] = 0, 0, np.inf
+        n -= 1
+    kept = np.unique(labels[mask])
+    relabel = np.zeros(labels.max() + 1, np.int32)
+    relabel[kept] = np.arange(1, len(kept) + 1)
+    order = np.concatenate([[0], kept])
+    return relabel[labels], len(kept), length[np.ix_(order, order)]
 
 
-def _parts_fit_better(region: np.ndarray, parts: list[np.ndarray], K: np.ndarray,
-                      plane: Plane) -> bool:
-    """Keep a split only where solids of revolution on the table explain the parts clearly
-    better than one explains the whole: every part's silhouette IoU above the whole's, and
-    their area-weighted mean at least ``SPLIT_GAIN`` above it (two glasses side by side, not a
-    goblet's bowl and foot)."""
+def _connected(group: list[int], length: np.ndarray) -> bool:
+    """Whether pieces ``group`` (1-based) form one region through shared boundaries."""
+    seen, todo = {group[0]}, [group[0]]
+    while todo:
+        i = todo.pop()
+        for j in group:
+            if j not in seen and length[i, j] > 0:
+                seen.add(j)
+                todo.append(j)
+    return len(seen) == len(group)
+
+
+def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *, max_pieces: int = 4,
+                   gain: float = SPLIT_GAIN, min_share: float = 0.2,
+                   whole_iou: float | None = None, depth: int = 2) -> list[np.ndarray]:
+    """Split a region made of touching objects where solids of revolution on the table explain
+    the parts clearly better than one explains the whole.
+
+    The region is cut into watershed pieces of the distance to its edge (at most ``max_pieces``),
+    and every grouping of them into two connected parts, each at least ``min_share`` of the
+    region (a sliver of background fits anything), is tried: both parts' silhouette IoUs
+    must exceed the whole's, and their area-weighted mean must gain ``gain`` on it (two glasses
+    side by side split; a goblet's bowl and foot, a bottle's body and neck do not). The best
+    such split wins and each part is split again, ``depth`` levels deep.
+    """
     from sr3d_cli.reconstruct.revolution_fit import fit_revolution
 
-    try:
-        whole = fit_revolution(region, K, plane).iou
-        fits = [fit_revolution(p, K, plane).iou for p in parts]
-    except ValueError:  # a part that cannot stand or lie on the table
-        return False
-    areas = [int(p.sum()) for p in parts]
-    return min(fits) > whole and float(np.average(fits, weights=areas)) >= whole + SPLIT_GAIN
+    labels, n, length = _pieces(region, max_pieces)
+    if n < 2 or depth < 1:
+        return [region]
+
+    def iou(mask: np.ndarray) -> float:
+        try:
+            return fit_revolution(mask, K, plane).iou
+        except ValueError:  # a part that cannot stand or lie on the table
+            return -1.0
+
+    whole = iou(region) if whole_iou is None else whole_iou
+    area = float(region.sum())
+    best = None
+    for bits in range(1, 2 ** (n - 1)):  # piece n stays in the second part
+        first = [k for k in range(1, n + 1) if bits >> (k - 1) & 1]
+        second = [k for k in range(1, n + 1) if k not in first]
+        if not (_connected(first, length) and _connected(second, length)):
+            continue
+        a = np.isin(labels, first)
+        b = region & ~a
+        if min(a.sum(), b.sum()) < min_share * area:
+            continue
+        ia, ib = iou(a), iou(b)
+        mean = (ia * a.sum() + ib * b.sum()) / area
+        if min(ia, ib) > whole and mean >= whole + gain and (best is None or mean > best[0]):
+            best = (mean, a, ia, b, ib)
+    if best is None:
+        return [region]
+    _, a, ia, b, ib = best
+    return [part for mask, fit in ((a, ia), (b, ib))
+            for part in split_touching(mask, K, plane, max_pieces=max_pieces, gain=gain,
+                                       min_share=min_share, whole_iou=fit, depth=depth - 1)]
 
 
 def merge_pieces(pieces: list[np.ndarray], shape: tuple[int, int], *, radius: int
