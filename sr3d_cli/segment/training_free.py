@@ -290,7 +290,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *, max_piece
         except ValueError:  # a part that cannot stand or lie on the table
             return -1.0
 
-    whole = iou(region) if whole_iou is None else whole_iou
+    whole = whole_iou  # fitted when a split worth trying turns up (most regions have none)
     area = float(region.sum())
     best = None
     for bits in range(1, 2 ** (n - 1)):  # piece n stays in the second part
@@ -302,6 +302,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *, max_piece
         b = region & ~a
         if min(a.sum(), b.sum()) < min_share * area:
             continue
+        if whole is None:
+            whole = iou(region)
         ia, ib = iou(a), iou(b)
         mean = (ia * a.sum() + ib * b.sum()) / area
         if min(ia, ib) > whole and mean >= whole + gain and (best is None or mean > best[0]):
