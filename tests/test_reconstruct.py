@@ -15,11 +15,11 @@ from sr3d_cli.config import IOConfig, ReconstructConfig
 from sr3d_cli.errors import InputError
 from sr3d_cli.evaluate import chamfer_distance
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.revolution import profile_from_mesh, revolve, silhouette
+from sr3d_cli.geometry.revolution import open_vessel, profile_from_mesh, revolve, silhouette
 from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_mask
-from sr3d_cli.reconstruct.revolution_fit import fit_revolution
+from sr3d_cli.reconstruct.revolution_fit import axial_view_angle, fit_revolution
 from tests import onnx_builders
 
 K = np.array([[600.0, 0, 319.5], [0, 600, 239.5], [0, 0, 1]])
@@ -72,19 +72,24 @@ def test_lying_bottle_recovered_with_its_base_at_the_wide_end():
     assert chamfer_distance(revolve(fit.profile), truth) < 0.05
 
 
-def _steep_bottle_frame(x: float):
-    """A 20 cm bottle standing under a camera looking down at 72 deg, its mask and raw depth:
-    30% true front-surface readings (2 mm noise), 30% see-through readings of the table."""
-    plane = _table(72.0, 0.5)
-    base = plane.intersect(np.array([x, 0.12, 1.0]))
-    h = 0.2
-    prof = np.array([[0, 0], [0.032, 0], [0.032, 0.13], [0.012, 0.17], [0.012, h], [0, h]])
+BOTTLE = np.array([[0, 0], [0.032, 0], [0.032, 0.13], [0.012, 0.17], [0.012, 0.2], [0, 0.2]])
+
+
+def _frame_from_above(prof: np.ndarray, elevation: float, x: float, y: float,
+                      surface: np.ndarray | None = None):
+    """A solid of revolution (``prof`` in metres) standing under a camera looking down at
+    ``elevation`` deg, its mask and raw depth: 30% true readings of the ``surface`` profile
+    (default ``prof``; an open vessel's inside) with 2 mm noise, 30% see-through readings of
+    the table. Returns plane, mask, depth, the see-through readings alone, height."""
+    plane = _table(elevation, 0.5)
+    base = plane.intersect(np.array([x, y, 1.0]))
+    h = float(prof[-1, 1])
     mask = _render(prof, base, plane.normal)
     n = plane.normal
     side = np.cross([1.0, 0, 0], n)
     side /= np.linalg.norm(side)
     T = make_T(np.stack([side, np.cross(n, side), n], axis=1), base)
-    mesh = revolve(prof / h)
+    mesh = revolve((prof if surface is None else surface) / h)
     uv, pts = project_mesh(np.asarray(mesh.vertices), T[:3, :3], T[:3, 3], h, K)
     ys, xs = np.nonzero(mask)
     front = surface_depth(uv, pts, np.asarray(mesh.faces), K, xs, ys, mask.shape)
@@ -101,7 +106,7 @@ def _steep_bottle_frame(x: float):
 
 @pytest.mark.parametrize("x", [-0.05, 0.0])
 def test_raw_depth_tells_a_standing_bottle_from_a_lying_one_seen_from_above(x):
-    plane, mask, depth, see_through, h = _steep_bottle_frame(x)
+    plane, mask, depth, see_through, h = _frame_from_above(BOTTLE, 72.0, x, 0.12)
     # from above, a short lying cylinder draws the bottle's outline better
     assert fit_revolution(mask, K, plane).resting == "lying"
     # readings on the glass say how far up its surface is
@@ -110,6 +115,27 @@ def test_raw_depth_tells_a_standing_bottle_from_a_lying_one_seen_from_above(x):
     assert fit.height == pytest.approx(h, rel=0.1)
     # see-through readings lie on the table and carry no vote
     assert fit_revolution(mask, K, plane, depth=see_through).resting == "lying"
+
+
+def test_seen_down_its_axis_a_bottle_takes_its_profile_from_the_readings():
+    """Straight from above the outline is a disc: a bottle, a jar and a glass draw the same one.
+    The readings on the neck's top and the shoulder give the height and the profile; a glass
+    seen the same way keeps its wide top (and is modelled open)."""
+    plane, mask, depth, see_through, h = _frame_from_above(BOTTLE, 88.0, 0.0, 0.0)
+    outline = fit_revolution(mask, K, plane, depth=see_through)
+    fit = fit_revolution(mask, K, plane, depth=depth)
+    assert axial_view_angle(mask, K, plane) < 10
+    assert abs(outline.height / h - 1) > 0.15  # the outline alone cannot tell
+    assert fit.height == pytest.approx(h, rel=0.05)
+    r, z = fit.profile[1:-1, 0] * fit.height, fit.profile[1:-1, 1] * fit.height
+    assert r[z > 0.18].mean() == pytest.approx(0.012, abs=0.004)  # the neck
+    assert r[z < 0.12].mean() == pytest.approx(0.032, abs=0.004)  # the body
+    glass = np.array([[0, 0], [0.03, 0], [0.036, 0.1], [0, 0.1]])
+    inside = open_vessel(glass[:-1] / 0.1, 0.03, 0.08) * 0.1
+    plane, mask, depth, _, h = _frame_from_above(glass, 88.0, 0.0, 0.0, surface=inside)
+    fit = fit_revolution(mask, K, plane, depth=depth)
+    assert fit.height == pytest.approx(h, rel=0.05)
+    assert fit.profile[-2, 0] >= 0.9 * fit.profile[1:-1, 0].max()
 
 
 def test_shape_error_on_generated_glassware(synth_set):

@@ -75,7 +75,8 @@ class Reconstructor:
     def __call__(self, rgb: np.ndarray, mask: np.ndarray, K: np.ndarray, plane: Plane | None,
                  label: str = "", depth: np.ndarray | None = None) -> Reconstruction:
         """Mesh of the object under ``mask (H, W) bool`` in ``rgb (H, W, 3) uint8``; the raw
-        ``depth (H, W)`` metres, when given, helps decide between standing and lying."""
+        ``depth (H, W)`` metres, when given, helps decide between standing and lying and, seen
+        from above, gives a standing object's height and profile."""
         cfg = self.cfg
         check_mask(mask, cfg)
         if cfg.backend == "onnx":
@@ -85,7 +86,8 @@ class Reconstructor:
             raise ObjectError("no support plane: the revolution fit needs the table")
         fit = fit_revolution(mask, K, plane, levels=cfg.levels, iterations=cfg.iterations,
                              lying_margin=cfg.lying_margin,
-                             depth=depth if cfg.use_depth else None, depth_vote=cfg.depth_vote)
+                             depth=depth if cfg.use_depth else None, depth_vote=cfg.depth_vote,
+                             axial_view=cfg.axial_view)
         meta = {"backend": cfg.backend, "resting": fit.resting, "silhouette_iou": round(fit.iou, 4),
                 "pose_hint": {"T_cam_obj": fit.T_cam_obj.tolist(), "scale": fit.height}}
         if cfg.backend == "library":

@@ -7,7 +7,9 @@ camera's tilt and perspective are handled exactly: the silhouette of the current
 with :func:`sr3d_cli.geometry.revolution.silhouette` and compared with the mask row by row in an
 image frame whose vertical is the projected axis; radii, the two ends and the lateral position
 are updated from the differences (a damped fixed-point iteration). Both hypotheses are fitted;
-the one whose silhouette matches the mask better wins (standing on ties).
+the one whose silhouette matches the mask better wins (standing on ties). Raw depth, when
+given, breaks ties the outline cannot (standing or lying, seen from above) and, for a camera
+looking down a standing object's axis, supplies the height and profile the outline lacks.
 
 The result is a profile in sr3d's object frame (base centre, +z up the axis, height 1) and the
 fitted metric pose, kept as a hint for ``align``.
@@ -288,11 +290,83 @@ def raw_support(fit: RevolutionFit, xs: np.ndarray, ys: np.ndarray, raw: np.ndar
     return int((np.abs(z - raw) < band).sum())
 
 
+def axial_view_angle(mask: np.ndarray, K: np.ndarray, plane: Plane) -> float:
+    """Degrees between the table normal and the camera ray to the mask's centroid: near 0,
+    the camera looks down a standing object's axis and its outline says almost nothing about
+    its height or profile (a bottle, a jar and a glass all draw a disc)."""
+    centre, _, _ = _principal(mask)
+    return float(np.degrees(np.arccos(np.clip(-_unit(_ray(centre, K)) @ plane.normal, -1, 1))))
+
+
+def _envelope(z: np.ndarray, r: np.ndarray, levels: np.ndarray, band: float,
+              floor: int) -> np.ndarray:
+    """Radius at each of ``levels``: a high percentile of r over the readings at or above it.
+    From above the camera sees the upper envelope (a neck's top, the shoulder, the rim); a
+    reading at (r, z) means the solid is at least r wide at z and at every height below."""
+    order = np.argsort(-z)  # highest first: the readings at or above a level are a prefix
+    zs, rs = z[order], r[order]
+    n = np.searchsorted(-zs, -(levels - 0.5 * band), side="right")
+    return np.array([np.percentile(rs[:max(k, min(floor, len(rs)))], 90) for k in n])
+
+
+def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray, levels: int,
+               band: float, min_points: int, iterations: int = 8) -> RevolutionFit | None:
+    """A standing solid seen down its axis, from the readings on it (camera frame, metres).
+
+    The height is a high percentile of the readings' heights above the table and the profile
+    their upper envelope (:func:`_envelope`), scaled to the widest radius; that radius and the
+    axis's place on the table are then moved until the silhouette's area and centroid match
+    the mask's (the readings give the shape, the outline the size). None with fewer than ``min_points`` readings."""
+    n = plane.normal
+    z_all = plane.height(points)
+    points = points[z_all > band]
+    if len(points) < min_points:
+        return None
+    height = float(np.percentile(plane.height(points), 98))
+    centre_px, _, _ = _principal(mask)
+    mid = Plane(n, plane.offset - 0.5 * height).intersect(_ray(centre_px, K))
+    if not np.all(np.isfinite(mid)) or height <= band:
+        return None
+    base = mid - 0.5 * height * n
+    widest = np.sqrt(mask.sum() / np.pi) * mid[2] / K[0, 0]
+    e1 = _unit(plane.project_direction(np.array([1.0, 0, 0])))
+    e2 = np.cross(n, e1)
+    zk = np.linspace(0.0, height, levels)
+    area = float(mask.sum())
+    for it in range(iterations + 1):
+        rel = points - base
+        z = rel @ n
+        r = np.linalg.norm(rel - z[:, None] * n, axis=1)
+        keep = r < widest + band
+        if keep.sum() < min_points:
+            return None
+        shape = _envelope(z[keep], r[keep], zk, band, max(5, min_points // 6))
+        radii = np.maximum(shape * widest / max(shape.max(), 1e-6), 0.002 * height)
+        sil = silhouette(base + zk[:, None] * n, n, radii, K, mask.shape)
+        if not sil.any() or it == iterations:
+            break
+        widest *= float(np.clip(np.sqrt(area / sil.sum()), 0.8, 1.25))
+        ys, xs = np.nonzero(sil)
+        gap = centre_px - np.array([xs.mean(), ys.mean()])
+        top = base + height * n  # the silhouette's centre lies between the base and the top
+        at = 0.5 * (base + top)
+        J = np.column_stack([(project((at + 0.005 * e)[None], K)[0] - project(at[None], K)[0])
+                             / 0.005 for e in (e1, e2)])
+        step = np.linalg.lstsq(J, gap, rcond=None)[0]
+        base = base + np.clip(step, -0.5 * widest, 0.5 * widest) @ np.stack([e1, e2])
+    inter = (sil & mask).sum()
+    iou = float(inter / ((sil | mask).sum() or 1))
+    profile = np.vstack([[0.0, 0.0], np.column_stack([radii / height, zk / height]),
+                         [0.0, 1.0]])
+    return RevolutionFit(profile, base, n.copy(), height, "standing", iou)
+
+
 def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int = 40,
                    iterations: int = 12, lying_margin: float = 0.03,
                    allow_lying: bool = True, depth: np.ndarray | None = None,
                    depth_band: float = 0.01, depth_min_points: int = 30,
-                   depth_vote: float = 2.0, vote_iou_gap: float = 0.06) -> RevolutionFit:
+                   depth_vote: float = 2.0, vote_iou_gap: float = 0.06,
+                   axial_view: float = 20.0) -> RevolutionFit:
     """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
 
     Standing and lying are both fitted; the better silhouette wins, lying only by
@@ -301,9 +375,16 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     front surface ``depth_vote`` times more off-table readings lie (within ``depth_band``, at
     least ``depth_min_points``) wins instead, if its silhouette IoU is within ``vote_iou_gap`` of
     the other's (a mask of two merged objects fits neither well; there the outline decides).
+    A standing solid seen within ``axial_view`` degrees of its axis is also fitted from the
+    readings (:func:`_fit_axial`); that fit is kept if more readings lie on its surface.
 
     Raises ValueError when neither hypothesis can be set up (e.g. the mask is above the horizon).
     """
+    readings = None
+    if depth is not None:
+        xs, ys, raw = _off_table_readings(mask, depth, K, plane, depth_band, 400)
+        readings = unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K)
+    axial = readings is not None and axial_view_angle(mask, K, plane) < axial_view
     fits = []
     for resting, init in (("standing", _init_standing), ("lying", _init_lying)):
         if resting == "lying" and not allow_lying:
@@ -312,13 +393,19 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         if model is None:
             continue
         model, iou = _fit(model, mask, K, plane, resting, iterations)
-        fits.append((iou + (lying_margin if resting == "standing" else 0.0),
-                     _result(model, resting, iou)))
+        fit = _result(model, resting, iou)
+        if axial and resting == "standing":
+            # the readings' fit replaces the outline's if more readings lie on its surface
+            # (off the axis, a flask's neck shifts against its body and the outline fit wins)
+            down = _fit_axial(mask, K, plane, readings, levels, depth_band, depth_min_points)
+            if down is not None and raw_support(down, xs, ys, raw, K, mask.shape, depth_band) > \
+                    raw_support(fit, xs, ys, raw, K, mask.shape, depth_band):
+                fit = down
+        fits.append((fit.iou + (lying_margin if resting == "standing" else 0.0), fit))
     if not fits:
         raise ValueError("the mask does not meet the support plane: cannot place an object")
     best = max(fits, key=lambda f: f[0])[1]
-    if depth is not None and len(fits) == 2:
-        xs, ys, raw = _off_table_readings(mask, depth, K, plane, depth_band, 400)
+    if readings is not None and len(fits) == 2:
         support = [raw_support(f, xs, ys, raw, K, mask.shape, depth_band) for _, f in fits]
         lo, hi = sorted(support)
         close = abs(fits[0][1].iou - fits[1][1].iou) <= vote_iou_gap
