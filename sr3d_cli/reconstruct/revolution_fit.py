@@ -316,13 +316,14 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
     The height is a high percentile of the readings' heights above the table and the profile
     their upper envelope (:func:`_envelope`), scaled to the widest radius; that radius and the
     axis's place on the table are then moved until the silhouette's area and centroid match
-    the mask's (the readings give the shape, the outline the size). None with fewer than ``min_points`` readings."""
+    the mask's (the readings give the shape, the outline the size). None with fewer than
+    ``min_points`` readings more than ``band`` above the table."""
     n = plane.normal
-    z_all = plane.height(points)
-    points = points[z_all > band]
+    above = plane.height(points)
+    points, above = points[above > band], above[above > band]
     if len(points) < min_points:
         return None
-    height = float(np.percentile(plane.height(points), 98))
+    height = float(np.percentile(above, 98))
     centre_px, _, _ = _principal(mask)
     mid = Plane(n, plane.offset - 0.5 * height).intersect(_ray(centre_px, K))
     if not np.all(np.isfinite(mid)) or height <= band:
@@ -348,8 +349,7 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
         widest *= float(np.clip(np.sqrt(area / sil.sum()), 0.8, 1.25))
         ys, xs = np.nonzero(sil)
         gap = centre_px - np.array([xs.mean(), ys.mean()])
-        top = base + height * n  # the silhouette's centre lies between the base and the top
-        at = 0.5 * (base + top)
+        at = base + 0.5 * height * n  # the silhouette's centre lies between base and top
         J = np.column_stack([(project((at + 0.005 * e)[None], K)[0] - project(at[None], K)[0])
                              / 0.005 for e in (e1, e2)])
         step = np.linalg.lstsq(J, gap, rcond=None)[0]
