@@ -385,7 +385,11 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         xs, ys, raw = _off_table_readings(mask, depth, K, plane, depth_band, 400)
         readings = unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K)
     axial = readings is not None and axial_view_angle(mask, K, plane) < axial_view
-    fits = []
+
+    def on_surface(fit: RevolutionFit) -> int:
+        return raw_support(fit, xs, ys, raw, K, mask.shape, depth_band)
+
+    fits = []  # (score, fit, readings on its surface when already counted)
     for resting, init in (("standing", _init_standing), ("lying", _init_lying)):
         if resting == "lying" and not allow_lying:
             continue
@@ -393,20 +397,21 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         if model is None:
             continue
         model, iou = _fit(model, mask, K, plane, resting, iterations)
-        fit = _result(model, resting, iou)
+        fit, count = _result(model, resting, iou), None
         if axial and resting == "standing":
             # the readings' fit replaces the outline's if more readings lie on its surface
             # (off the axis, a flask's neck shifts against its body and the outline fit wins)
+            count = on_surface(fit)
             down = _fit_axial(mask, K, plane, readings, levels, depth_band, depth_min_points)
-            if down is not None and raw_support(down, xs, ys, raw, K, mask.shape, depth_band) > \
-                    raw_support(fit, xs, ys, raw, K, mask.shape, depth_band):
-                fit = down
-        fits.append((fit.iou + (lying_margin if resting == "standing" else 0.0), fit))
+            down_count = on_surface(down) if down is not None else -1
+            if down_count > count:
+                fit, count = down, down_count
+        fits.append((fit.iou + (lying_margin if resting == "standing" else 0.0), fit, count))
     if not fits:
         raise ValueError("the mask does not meet the support plane: cannot place an object")
     best = max(fits, key=lambda f: f[0])[1]
     if readings is not None and len(fits) == 2:
-        support = [raw_support(f, xs, ys, raw, K, mask.shape, depth_band) for _, f in fits]
+        support = [on_surface(f) if count is None else count for _, f, count in fits]
         lo, hi = sorted(support)
         close = abs(fits[0][1].iou - fits[1][1].iou) <= vote_iou_gap
         if close and hi >= depth_min_points and hi >= depth_vote * lo:
