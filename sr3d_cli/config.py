@@ -131,19 +131,21 @@ class GraspConfig:
     width_margin: float = 0.005
     clearance: float = 0.003
     seeds: int = 64
+    seed: int = 0
     approaches: int = 7
     pair_radius: float = 0.004
     contact_band: float = 0.002
     collision_points: int = 3
     collision_margin: float = 0.003
-    mesh_points: int = 3000
+    mesh_points: int = 2400
     stride: int = 3
     nms_distance: float = 0.03
     nms_angle: float = 30.0
     top_k: int = 10
-    friction_weight: float = 0.6
-    width_weight: float = 0.2
-    approach_weight: float = 0.2
+    friction_weight: float = 0.48
+    width_weight: float = 0.16
+    approach_weight: float = 0.16
+    centre_weight: float = 0.2
 
 
 @dataclass

@@ -6,7 +6,8 @@ line between them and approach directions are sampled around the table normal, p
 it. Each candidate frame is tried at several depths (deepest first): the object's cross-section
 between the fingers sets the opening and the centre, the fingers and palm must hold no scene point
 and stay above the table, and the contact normals must lie inside the friction cone. Score:
-friction margin, opening margin and approach from above, weighted (config). Non-maximum
+friction margin, opening margin, approach from above and a grasp centre near half the object's
+height, weighted (config). Non-maximum
 suppression, then the best K per object.
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
@@ -148,7 +149,7 @@ class Planner:
         """Candidate grasp frames from antipodal seed pairs: R (F, 3, 3), centre (F, 3), and the
         distance between the pair (F,)."""
         cfg, g = self.cfg, self.gripper
-        rng = np.random.default_rng(k)
+        rng = np.random.default_rng([cfg.seed, k])
         n_pts = len(target.points)
         seeds = rng.choice(n_pts, size=min(cfg.seeds, n_pts), replace=False)
         s, n = target.points[seeds], target.normals[seeds]
@@ -246,6 +247,7 @@ class Planner:
         placed = np.zeros(len(R), bool)
         down = -plane.normal
         approach_up = np.clip(R[:, :, 0] @ down, 0, 1)
+        top = max(float(plane.height(target.points).max()), 1e-6)
         best = np.full(len(R), -1.0)
         out = np.zeros((len(R), 4))                               # width, depth, ymid, score
         for depth in sorted(cfg.depths, reverse=True):
@@ -294,9 +296,15 @@ class Planner:
             corners = to_camera(R[idx], centre, g.corners(width[idx], dd))
             ok[idx] = (hits < cfg.collision_points) & \
                 (plane.height(corners).min(axis=1) >= cfg.clearance)
+            # 1 at half the object's height, 0 at the table and at the top: near the centre of
+            # mass, and away from rims and shoulders, where a model's small height error moves
+            # the surface the most
+            centred = np.zeros(len(R))
+            centred[idx] = 1 - 2 * np.abs(np.clip(plane.height(centre) / top, 0, 1) - 0.5)
             score = (cfg.friction_weight * (1 - mu_needed / cfg.friction)
                      + cfg.width_weight * (1 - width / g.max_width)
-                     + cfg.approach_weight * approach_up)
+                     + cfg.approach_weight * approach_up
+                     + cfg.centre_weight * centred)
             take = ok & (best < 0)
             best[take] = score[take]
             out[take] = np.stack([width, np.full(len(R), depth), ymid, score], 1)[take]
