@@ -132,6 +132,7 @@ class GraspConfig:
     clearance: float = 0.003
     seeds: int = 64
     seed: int = 0
+    redraws: int = 2
     approaches: int = 7
     pair_radius: float = 0.004
     contact_band: float = 0.002

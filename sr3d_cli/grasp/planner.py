@@ -126,30 +126,37 @@ class Planner:
         target = target.select(has_normal)
         if len(target.points) < 20:
             return GraspSet.empty(), f"{len(target.points)} surface points, too few"
-        R, c, span = self._frames(k, target, plane)
-        if len(R) == 0:
-            return GraspSet.empty(), "no antipodal pair within the gripper's opening"
         centre = target.points.mean(axis=0)
         near = np.linalg.norm(scene.points - centre, axis=1) < \
             g.reach() + np.ptp(target.points, axis=0).max()
         # the table is checked exactly by the plane test; points at its height cannot be hit
         # by a gripper that passes it
         scene = scene.select(near & (plane.height(scene.points) >= cfg.clearance))
-        found = [self._try_frames(k, R[s:s + 48], c[s:s + 48], span[s:s + 48], target, scene,
-                                  plane)
-                 for s in range(0, len(R), 48)]
-        grasps = GraspSet.concat([f for f in found if f is not None])
+        # an object with few holdable places (a goblet's stem, a wide beaker's rim) may get no
+        # seed on them: draw other seeds, up to ``redraws`` times, while nothing holds
+        rng = np.random.default_rng([cfg.seed, k])
+        grasps, pairs = GraspSet.empty(), 0
+        for _ in range(1 + cfg.redraws):
+            R, c, span = self._frames(target, plane, rng)
+            pairs += len(R)
+            found = [self._try_frames(k, R[s:s + 48], c[s:s + 48], span[s:s + 48], target,
+                                      scene, plane)
+                     for s in range(0, len(R), 48)]
+            grasps = GraspSet.concat([f for f in found if f is not None])
+            if len(grasps):
+                break
+        if pairs == 0:
+            return grasps, "no antipodal pair within the gripper's opening"
         if len(grasps) == 0:
             return grasps, (f"no collision-free grasp inside the friction cone within the "
                             f"{g.max_width:.3f} m opening")
         grasps = nms(grasps, cfg.nms_distance, np.radians(cfg.nms_angle))
         return grasps.take(slice(0, cfg.top_k)), ""
 
-    def _frames(self, k: int, target: Cloud, plane: Plane):
+    def _frames(self, target: Cloud, plane: Plane, rng: np.random.Generator):
         """Candidate grasp frames from antipodal seed pairs: R (F, 3, 3), centre (F, 3), and the
         distance between the pair (F,)."""
         cfg, g = self.cfg, self.gripper
-        rng = np.random.default_rng([cfg.seed, k])
         n_pts = len(target.points)
         seeds = rng.choice(n_pts, size=min(cfg.seeds, n_pts), replace=False)
         s, n = target.points[seeds], target.normals[seeds]
