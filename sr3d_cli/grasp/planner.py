@@ -7,8 +7,8 @@ it. Each candidate frame is tried at several depths (deepest first): the object'
 between the fingers sets the opening and the centre, the fingers and palm must hold no scene point
 and stay above the table, and the contact normals must lie inside the friction cone. Score:
 friction margin, opening margin, approach from above and a grasp centre near half the object's
-height, weighted (config). Non-maximum
-suppression, then the best K per object.
+height, weighted (config). Non-maximum suppression, then the best K per object. An object where
+nothing holds gets other seed points (``redraws``).
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
