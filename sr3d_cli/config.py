@@ -131,6 +131,7 @@ class GraspConfig:
     width_margin: float = 0.005
     clearance: float = 0.003
     seeds: int = 64
+    seed_bins: int = 12
     seed: int = 0
     redraws: int = 2
     approaches: int = 7

@@ -1,14 +1,14 @@
 """Training-free antipodal grasp planner on a scene point cloud.
 
-For each object: seed points on its surface; across each seed, along its normal, the farthest
-point of the same object within the gripper's opening (the antipode); the closing direction is the
-line between them and approach directions are sampled around the table normal, perpendicular to
-it. Each candidate frame is tried at several depths (deepest first): the object's cross-section
-between the fingers sets the opening and the centre, the fingers and palm must hold no scene point
-and stay above the table, and the contact normals must lie inside the friction cone. Score:
-friction margin, opening margin, approach from above and a grasp centre near half the object's
-height, weighted (config). Non-maximum suppression, then the best K per object. An object where
-nothing holds gets other seed points (``redraws``).
+For each object: seed points on its surface, as many on each slice along its length; across each
+seed, along its normal, the farthest point of the same object within the gripper's opening (the
+antipode); the closing direction is the line between them and approach directions are sampled
+around the table normal, perpendicular to it. Each candidate frame is tried at several depths
+(deepest first): the object's cross-section between the fingers sets the opening and the centre,
+the fingers and palm must hold no scene point and stay above the table, and the contact normals
+must lie inside the friction cone. Score: friction margin, opening margin, approach from above and
+a grasp centre near half the object's height, weighted (config). Non-maximum suppression, then the
+best K per object. An object where nothing holds gets other seed points (``redraws``).
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
@@ -153,12 +153,28 @@ class Planner:
         grasps = nms(grasps, cfg.nms_distance, np.radians(cfg.nms_angle))
         return grasps.take(slice(0, cfg.top_k)), ""
 
+    def _seed_points(self, points: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Indices of ``seeds`` points spread evenly along the object's longest axis: the points
+        are cut into ``seed_bins`` slices across it and each slice is equally likely, so a stem,
+        a neck or a foot gets as many seeds as a cup or a body of far more area (0 bins: uniform
+        over the surface)."""
+        cfg = self.cfg
+        size = min(cfg.seeds, len(points))
+        if cfg.seed_bins < 2:
+            return rng.choice(len(points), size=size, replace=False)
+        centred = points - points.mean(axis=0)
+        along = centred @ np.linalg.svd(centred, full_matrices=False)[2][0]
+        span = max(float(np.ptp(along)), 1e-9)
+        bins = np.minimum(((along - along.min()) / span * cfg.seed_bins).astype(np.int64),
+                          cfg.seed_bins - 1)
+        weight = 1.0 / np.bincount(bins, minlength=cfg.seed_bins)[bins]
+        return rng.choice(len(points), size=size, replace=False, p=weight / weight.sum())
+
     def _frames(self, target: Cloud, plane: Plane, rng: np.random.Generator):
         """Candidate grasp frames from antipodal seed pairs: R (F, 3, 3), centre (F, 3), and the
         distance between the pair (F,)."""
         cfg, g = self.cfg, self.gripper
-        n_pts = len(target.points)
-        seeds = rng.choice(n_pts, size=min(cfg.seeds, n_pts), replace=False)
+        seeds = self._seed_points(target.points, rng)
         s, n = target.points[seeds], target.normals[seeds]
         v = target.points[None] - s[:, None]                     # (S, M, 3)
         along = -np.einsum("smk,sk->sm", v, n)                   # distance into the object
