@@ -2,7 +2,7 @@
 
 Most glassware is rotationally symmetric. Given the mask, the camera and the support plane, the
 object is modelled as a solid of revolution standing on the plane (axis = plane normal) or lying
-on it (axis parallel to the plane, resting on its widest part). The fit runs in 3D, so the
+on it (resting on the hull of its profile, so a goblet's axis tilts). The fit runs in 3D, so the
 camera's tilt and perspective are handled exactly: the silhouette of the current model is drawn
 with :func:`sr3d_cli.geometry.revolution.silhouette` and compared with the mask row by row in an
 image frame whose vertical is the projected axis; radii, the two ends and the lateral position
@@ -127,8 +127,10 @@ def _widths(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 
 def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: str,
-         iterations: int) -> tuple[_Model, float]:
-    """Refine ``model`` so that its silhouette matches ``mask``; returns (model, IoU)."""
+         iterations: int, tilt: bool = False) -> tuple[_Model, float]:
+    """Refine ``model`` so that its silhouette matches ``mask``; returns (model, IoU). A lying
+    model's axis stays parallel to the plane, or with ``tilt`` rests on its hull
+    (:func:`_rest_on_hull`)."""
     n = plane.normal
     for it in range(iterations + 1):
         c0, c1 = project(model.base[None], K)[0], project((model.base + model.height
@@ -191,12 +193,50 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
                     model.axis = rotation_about(n, float(np.clip(0.8 * d_img / gain, -0.3, 0.3))
                                                 ) @ model.axis
                     model.base = mid - 0.5 * model.height * model.axis
-            # the axis rests at the largest radius above the plane
-            lift = model.radii.max() - plane.height(model.base[None])[0]
-            model.base = model.base + lift * n
+            if tilt:
+                _rest_on_hull(model, plane)
+            else:  # the axis rests at the largest radius above the plane
+                lift = model.radii.max() - plane.height(model.base[None])[0]
+                model.base = model.base + lift * n
     inter = (frame.obs & ren).sum()
     union = (frame.obs | ren).sum()
     return model, float(inter / union) if union else 0.0
+
+
+def _resting_tilt(z: np.ndarray, r: np.ndarray) -> tuple[float, float]:
+    """How a body of revolution lies on a table: on the edge of its profile's convex hull that
+    has the centre of mass (of the solid, weight r^2) over it; a goblet rests on its foot's rim
+    and its cup, tilted. z (L,) increasing along the axis from the base, r (L,) radii (metres).
+    Returns the axis's rise towards +z (radians) and the axis's height at z = 0 above the table.
+    """
+    pts = np.column_stack([np.concatenate([[z[0]], z, [z[-1]]]),
+                           np.concatenate([[0.0], r, [0.0]])])
+    upper = [pts[0]]  # upper hull in (z, r), left to right (monotone chain)
+    for p in pts[1:]:
+        while len(upper) >= 2:
+            u, v = upper[-1] - upper[-2], p - upper[-2]
+            if u[0] * v[1] - u[1] * v[0] < 0:  # a right turn: upper[-1] stays on the hull
+                break
+            upper.pop()
+        upper.append(p)
+    zc = float((z * r ** 2).sum() / max((r ** 2).sum(), 1e-12))
+    for a, b in zip(upper[:-1], upper[1:]):
+        if b[0] - a[0] > 1e-9 and a[0] - 1e-9 <= zc <= b[0] + 1e-9:
+            theta = float(np.arctan2(b[1] - a[1], b[0] - a[0]))
+            return theta, float(a[1] * np.cos(theta) - a[0] * np.sin(theta))
+    return 0.0, float(r.max())
+
+
+def _rest_on_hull(model: _Model, plane: Plane) -> None:
+    """Tilt a lying model's axis about its middle and set its height so that it rests on the
+    table as :func:`_resting_tilt` says."""
+    n = plane.normal
+    flat = _unit(model.axis - (model.axis @ n) * n)
+    theta, h0 = _resting_tilt(np.linspace(0, model.height, len(model.radii)), model.radii)
+    mid = model.base + 0.5 * model.height * model.axis
+    model.axis = np.cos(theta) * flat + np.sin(theta) * n
+    base = mid - 0.5 * model.height * model.axis
+    model.base = base + (h0 - plane.height(base[None])[0]) * n
 
 
 def _principal(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -366,7 +406,7 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
                    allow_lying: bool = True, depth: np.ndarray | None = None,
                    depth_band: float = 0.01, depth_min_points: int = 30,
                    depth_vote: float = 2.0, vote_iou_gap: float = 0.06,
-                   axial_view: float = 20.0) -> RevolutionFit:
+                   axial_view: float = 20.0, tilt_tolerance: float = 0.01) -> RevolutionFit:
     """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
 
     Standing and lying are both fitted; the better silhouette wins, lying only by
@@ -377,6 +417,9 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     the other's (a mask of two merged objects fits neither well; there the outline decides).
     A standing solid seen within ``axial_view`` degrees of its axis is also fitted from the
     readings (:func:`_fit_axial`); that fit is kept if more readings lie on its surface.
+    Standing and lying are weighed with the lying axis parallel to the table; a lying winner is
+    then fitted again resting on its hull, tilted (:func:`_resting_tilt`), and that fit is kept
+    if its IoU is within ``tilt_tolerance`` of the flat one's.
 
     Raises ValueError when neither hypothesis can be set up (e.g. the mask is above the horizon).
     """
@@ -416,4 +459,12 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         close = abs(fits[0][1].iou - fits[1][1].iou) <= vote_iou_gap
         if close and hi >= depth_min_points and hi >= depth_vote * lo:
             best = fits[int(np.argmax(support))][1]
+    if best.resting == "lying":
+        # decided flat (a tilt would let the lying fit take short standing vessels); from its
+        # own start, since the flat fit's radii hold the tilt as a taper
+        start = _init_lying(mask, K, plane, levels)
+        if start is not None:
+            model, iou = _fit(start, mask, K, plane, "lying", iterations, tilt=True)
+            if iou >= best.iou - tilt_tolerance:
+                best = _result(model, "lying", iou)
     return best
