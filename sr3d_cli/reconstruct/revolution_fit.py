@@ -231,7 +231,7 @@ def _rest_on_hull(model: _Model, plane: Plane) -> None:
     """Tilt a lying model's axis about its middle and set its height so that it rests on the
     table as :func:`_resting_tilt` says."""
     n = plane.normal
-    flat = _unit(model.axis - (model.axis @ n) * n)
+    flat = _unit(plane.project_direction(model.axis))
     theta, h0 = _resting_tilt(np.linspace(0, model.height, len(model.radii)), model.radii)
     mid = model.base + 0.5 * model.height * model.axis
     model.axis = np.cos(theta) * flat + np.sin(theta) * n
