@@ -7,6 +7,7 @@ the given masks imported (skipped with a reason when absent).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 import sys
@@ -28,6 +29,24 @@ from sr3d_cli.synth.generate import write_scene
 
 ROOT = Path(__file__).resolve().parent
 REAL = ROOT.parent.parent / "shared" / "realdata" / "cleargrasp-real"
+
+
+def generated_set(folder: Path, count: int, cfg: SynthConfig, renderer) -> None:
+    """Make sure ``folder`` holds scenes 0..count-1 of ``cfg``'s seed as the current generator
+    draws them: a stamp of the generator's sources (sr3d_cli/synth, sr3d_cli/geometry) is kept
+    with the set, and a changed generator regenerates it instead of measuring stale scenes."""
+    package = ROOT.parent / "sr3d_cli"
+    digest = hashlib.sha256()
+    for path in sorted([*(package / "synth").glob("*.py"), *(package / "geometry").glob("*.py")]):
+        digest.update(path.read_bytes())
+    stamp = folder / "GENERATOR"
+    if folder.is_dir() and not (stamp.is_file() and stamp.read_text() == digest.hexdigest()):
+        shutil.rmtree(folder)
+    for i in range(count):
+        if not (folder / f"scene_{i:04d}" / "camera.json").is_file():
+            write_scene(folder / f"scene_{i:04d}", i, cfg, renderer)
+    folder.mkdir(parents=True, exist_ok=True)
+    stamp.write_text(digest.hexdigest())
 
 
 def _rotation_error(R, R_gt, symmetric: bool) -> float:
@@ -200,10 +219,7 @@ def speed_bench(work: Path, frames: int = 12) -> dict:
     scenes, out = work / "speed_in", work / "speed_out"
     cfg = SynthConfig(seed=701, views=1, resolutions=["640x480"], objects=[1, 1],
                       distractors=[0, 0])
-    renderer = make_renderer("auto")
-    for i in range(frames + 1):
-        if not (scenes / f"scene_{i:04d}" / "camera.json").is_file():
-            write_scene(scenes / f"scene_{i:04d}", i, cfg, renderer)
+    generated_set(scenes, frames + 1, cfg, make_renderer("auto"))
     shutil.rmtree(out, ignore_errors=True)
     cores = os.sched_getaffinity(0)
     os.sched_setaffinity(0, {min(cores)})
@@ -298,10 +314,7 @@ def main(frames: int = 24, sections: tuple[str, ...] = SECTIONS) -> None:
     work = ROOT / "work"
     synth = work / "synth700"
     cfg = SynthConfig(seed=700, views=1)
-    renderer = make_renderer("auto")
-    for i in range(frames):
-        if not (synth / f"scene_{i:04d}" / "camera.json").is_file():
-            write_scene(synth / f"scene_{i:04d}", i, cfg, renderer)
+    generated_set(synth, frames, cfg, make_renderer("auto"))
     default = Config()
     paper = Config()
     paper.align.mode = "paper"

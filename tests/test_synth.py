@@ -10,7 +10,9 @@ from sr3d_cli.config import SynthConfig
 from sr3d_cli.io.contract import check_frame
 from sr3d_cli.io.scene import SceneSource
 from sr3d_cli.render import NumpyRenderer, make_renderer
+from sr3d_cli.geometry.revolution import revolve
 from sr3d_cli.synth.generate import write_scene
+from sr3d_cli.synth.layout import lying_rotation
 from sr3d_cli.synth.shapes import KINDS, make_glassware
 
 
@@ -29,6 +31,41 @@ def test_every_kind_is_watertight_with_outward_normals():
             mesh = make_glassware(kind, rng).unit_mesh()
             assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
             assert mesh.bounds[0, 2] == pytest.approx(0) and mesh.bounds[1, 2] == pytest.approx(1)
+
+
+def _lie(profile: np.ndarray, mesh) -> tuple[np.ndarray, np.ndarray]:
+    """World vertices of a unit mesh laid down by the generator, and its centre of mass."""
+    R = lying_rotation(profile, mesh.center_mass[2])
+    return mesh.vertices @ R.T, R @ mesh.center_mass
+
+
+def test_lying_glassware_rests_with_its_centre_of_mass_over_the_contact():
+    """Laid on its side, every object touches the table along a line (two rings' lowest points)
+    and its centre of mass is above that line, so it would not roll: stable, as a real object
+    comes to rest."""
+    rng = np.random.default_rng(5)
+    for kind in KINDS:
+        for _ in range(10):
+            glass = make_glassware(kind, rng)
+            v, com = _lie(glass.profile / glass.height, glass.unit_mesh())
+            low = v[v[:, 2] < v[:, 2].min() + 1e-9]
+            d = (low[-1] - low[0])[:2]
+            assert len(low) >= 2 and np.linalg.norm(d) > 0.05  # a line, not a point
+            d /= np.linalg.norm(d)
+            along = (low[:, :2] - low[0, :2]) @ d
+            c = (com[:2] - low[0, :2]) @ d
+            assert along.min() - 1e-9 <= c <= along.max() + 1e-9, kind
+            off = com[:2] - low[0, :2]
+            assert abs(d[0] * off[1] - d[1] * off[0]) < 1e-9  # above the line, by symmetry
+
+
+def test_a_bottle_with_a_long_shoulder_lies_on_its_body():
+    """The longest side of this bottle's outline runs from its shoulder to its lip, but its
+    weight sits over the body: it lies with its axis level, not propped up on the neck."""
+    prof = np.array([[0, 0], [0.03, 0], [0.03, 0.08], [0.01, 0.2], [0.008, 0.22], [0, 0.22]])
+    v, _ = _lie(prof / 0.22, revolve(prof / 0.22))
+    axis = v[-1] - v[-2]  # top centre minus base centre (revolve's last two vertices)
+    assert abs(axis[2]) < 1e-9
 
 
 def test_contract_of_every_file(scenes):

