@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from sr3d_cli.config import SynthConfig
+from sr3d_cli.geometry.revolution import revolve
 from sr3d_cli.io.contract import check_frame
 from sr3d_cli.io.scene import SceneSource
 from sr3d_cli.render import NumpyRenderer, make_renderer
-from sr3d_cli.geometry.revolution import revolve
 from sr3d_cli.synth.generate import write_scene
 from sr3d_cli.synth.layout import lying_rotation
 from sr3d_cli.synth.shapes import KINDS, make_glassware
