@@ -264,8 +264,7 @@ def mesh_bench(synth: Path) -> dict:
     from sr3d_cli.config import PlaneConfig, ReconstructConfig, SegmentConfig
     from sr3d_cli.evaluate import chamfer_distance, instance_ious
     from sr3d_cli.geometry.revolution import profile_from_mesh, revolve
-    from sr3d_cli.reconstruct import ObjectError, check_mask
-    from sr3d_cli.reconstruct.revolution_fit import fit_revolution
+    from sr3d_cli.reconstruct import ObjectError, check_mask, configured_fit
     from sr3d_cli.segment import Segmenter, support_plane
 
     segmenter = Segmenter(SegmentConfig(), PlaneConfig())
@@ -291,9 +290,8 @@ def mesh_bench(synth: Path) -> dict:
                     try:
                         rc = ReconstructConfig()
                         check_mask(gt == obj["id"], rc)
-                        fit = fit_revolution(gt == obj["id"], frame.camera.K, plane,
-                                             depth=frame.depth_m if rc.use_depth else None,
-                                             depth_vote=rc.depth_vote)
+                        fit = configured_fit(gt == obj["id"], frame.camera.K, plane, rc,
+                                             frame.depth_m)
                     except ObjectError:
                         continue  # cut by the border or too small: not a shape measurement
                     truth = profile_from_mesh(trimesh.load(source.root / obj["mesh"]))

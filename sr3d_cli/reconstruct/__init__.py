@@ -16,7 +16,7 @@ import trimesh
 from sr3d_cli.config import ReconstructConfig
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, revolve
-from sr3d_cli.reconstruct.revolution_fit import fit_revolution
+from sr3d_cli.reconstruct.revolution_fit import RevolutionFit, fit_revolution
 
 
 class ObjectError(ValueError):
@@ -56,6 +56,16 @@ def check_mask(mask: np.ndarray, cfg: ReconstructConfig) -> None:
                           "(set reconstruct.allow_border: true to try anyway)")
 
 
+def configured_fit(mask: np.ndarray, K: np.ndarray, plane: Plane, cfg: ReconstructConfig,
+                   depth: np.ndarray | None = None) -> RevolutionFit:
+    """:func:`fit_revolution` with the ``reconstruct`` config's settings (the one place they
+    are passed on); ``depth`` is used when ``use_depth`` is on."""
+    return fit_revolution(mask, K, plane, levels=cfg.levels, iterations=cfg.iterations,
+                          lying_margin=cfg.lying_margin,
+                          depth=depth if cfg.use_depth else None, depth_vote=cfg.depth_vote,
+                          axial_view=cfg.axial_view)
+
+
 class Reconstructor:
     """One per batch: loads models or the library once; :meth:`__call__` per object."""
 
@@ -84,10 +94,7 @@ class Reconstructor:
             return Reconstruction(mesh, {"backend": "onnx"})
         if plane is None:
             raise ObjectError("no support plane: the revolution fit needs the table")
-        fit = fit_revolution(mask, K, plane, levels=cfg.levels, iterations=cfg.iterations,
-                             lying_margin=cfg.lying_margin,
-                             depth=depth if cfg.use_depth else None, depth_vote=cfg.depth_vote,
-                             axial_view=cfg.axial_view)
+        fit = configured_fit(mask, K, plane, cfg, depth)
         meta = {"backend": cfg.backend, "resting": fit.resting, "silhouette_iou": round(fit.iou, 4),
                 "pose_hint": {"T_cam_obj": fit.T_cam_obj.tolist(), "scale": fit.height}}
         if cfg.backend == "library":
