@@ -152,6 +152,45 @@ def test_a_goblet_whose_foot_meets_a_flask_is_split_between_them():
     assert min(ious.values()) > 0.95
 
 
+def test_a_glass_beside_a_can_does_not_take_in_the_table_between_them(monkeypatch):
+    """A glass (missing readings, some read through it) 9 px from an opaque can whose side
+    casts a 4 px band of missing readings (a stereo camera's shadow): the glass's mask keeps
+    out the table seen between them. Without the band given to the can, it takes them in."""
+    from sr3d_cli.geometry.plane import Plane
+    from sr3d_cli.segment import training_free
+
+    K = np.array([[500.0, 0, 160], [0, 500, 120], [0, 0, 1]])
+    n = np.array([0.0, -0.8, -0.6])  # towards the camera
+    plane = Plane(n, 0.5)
+    v, u = np.mgrid[0:240, 0:320]
+    rays = np.stack([(u - 160) / 500, (v - 120) / 500, np.ones_like(u, float)], -1)
+    table = -0.5 / (rays @ n)
+    rng = np.random.default_rng(1)
+    depth = table + rng.normal(0, 0.0005, table.shape)
+    can = (v >= 55) & (v < 185) & (u >= 190) & (u < 250)
+    depth[can] = table[can] - 0.08 + rng.normal(0, 0.0005, can.sum())
+    depth[(v >= 55) & (v < 185) & (u >= 186) & (u < 190)] = 0  # the can's shadow band
+    glass = ((u - 137) / 40.0) ** 2 + ((v - 120) / 55.0) ** 2 <= 1  # right edge at u = 177
+    through = np.zeros_like(glass)
+    for cy, cx, r in ((100, 125, 9), (140, 150, 8), (115, 160, 6)):
+        through |= (v - cy) ** 2 + (u - cx) ** 2 < r * r  # the table read through the glass
+    depth[glass & ~through] = 0
+    depth = depth.astype(np.float32)
+    rgb = np.full(depth.shape + (3,), 128, np.uint8)
+    gap = (u > 177) & (u < 186) & (v >= 75) & (v < 165)
+
+    def glass_mask():
+        found = training_free.segment_training_free(rgb, depth, K, plane,
+                                                    grabcut_iterations=0)
+        return next(c.mask for c in found if c.mask[120, 137])
+
+    mask = glass_mask()
+    assert (mask & glass).sum() / (mask | glass).sum() > 0.95
+    assert (mask & gap).sum() < 0.02 * gap.sum()
+    monkeypatch.setattr(training_free, "opaque_edges", lambda g, o: np.zeros_like(g))
+    assert (glass_mask() & gap).sum() > 0.5 * gap.sum()
+
+
 def test_import_splits_binary_masks_and_keeps_ids(tmp_path):
     binary = np.zeros((20, 30), np.uint8)
     binary[2:6, 2:8] = 255

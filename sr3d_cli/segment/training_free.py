@@ -8,7 +8,9 @@ The steps:
 1. heights above the fitted support plane for every valid reading;
 2. evidence of glass: holes where the table should be seen, plus rough readings above the table
    (the local residual against a median filter is far above the sensor's noise there);
-3. opaque evidence: smooth readings clearly above the table (these veto a candidate);
+3. opaque evidence: smooth readings clearly above the table (these veto a candidate); the thin
+   runs of missing readings along an opaque object's edge (a stereo camera's shadow) are its,
+   not glass, so a glass next to a can does not take in the table between them;
 4. candidates: morphological closing of the evidence, filling of regions enclosed by it (an
    outline of holes around a see-through object), opening to drop thin artefacts such as the
    dropouts along opaque edges, and an area floor;
@@ -33,6 +35,7 @@ from sr3d_cli.geometry.plane import Plane
 
 ON_TABLE_SHARE = 0.3  # least share of a candidate over the table's footprint
 SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (split_touching)
+EDGE_REACH, EDGE_SHARE, EDGE_THIN = 8, 0.8, 4.0  # an opaque object's edge band (opaque_edges)
 
 
 @dataclass
@@ -136,7 +139,29 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     glass = holes | (above & is_rough)
     opaque = above & ~is_rough
     opaque = cv2.morphologyEx(opaque.astype(np.uint8), cv2.MORPH_OPEN, _disk(2)) > 0
+    glass &= ~opaque_edges(glass, opaque)
     return glass, opaque, table_footprint(on_table)
+
+
+def opaque_edges(glass: np.ndarray, opaque: np.ndarray, *, reach: int = EDGE_REACH,
+                 share: float = EDGE_SHARE, thin: float = EDGE_THIN) -> np.ndarray:
+    """Glass evidence ``(H, W) bool`` that belongs to an opaque object's edge: the connected
+    components at most ``2 * thin`` pixels thick, ``share`` of whose pixels lie within ``reach``
+    pixels of opaque evidence. A stereo camera misses readings in a thin band along an opaque
+    object's side (and the readings at its edge are rough); left as glass, the closing of
+    :func:`find_candidates` bridges from a glass nearby to that band, and the table readings
+    between them join the glass's mask. A glass's own evidence is thicker, or only touches
+    the opaque object along part of its outline."""
+    near = cv2.dilate(opaque.astype(np.uint8), _disk(reach)) > 0
+    count, labels = cv2.connectedComponents(glass.astype(np.uint8), connectivity=8)
+    size = np.bincount(labels.ravel(), minlength=count)
+    close = np.bincount(labels[near].ravel(), minlength=count)
+    inset = cv2.distanceTransform(glass.astype(np.uint8), cv2.DIST_L2, 3)
+    thickness = np.zeros(count)
+    np.maximum.at(thickness, labels.ravel(), inset.ravel())
+    edge = (close >= share * size) & (thickness <= thin)
+    edge[0] = False
+    return edge[labels]
 
 
 def find_candidates(glass: np.ndarray, opaque: np.ndarray, *, min_area: int,
