@@ -71,6 +71,7 @@ class ReconstructConfig:
     open_top_ratio: float = 0.7
     open_wall: float = 0.0025
     open_base: float = 0.008
+    open_explains: float = 0.5
     onnx_model: str = ""
     onnx_decoder: str = ""
     onnx_threshold: float = 25.0

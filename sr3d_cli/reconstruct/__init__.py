@@ -8,7 +8,7 @@ origin at the centre of its base.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import trimesh
@@ -16,7 +16,8 @@ import trimesh
 from sr3d_cli.config import ReconstructConfig
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, revolve
-from sr3d_cli.reconstruct.revolution_fit import RevolutionFit, fit_revolution
+from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, RevolutionFit, fit_revolution,
+                                                 off_table_readings, raw_support)
 
 
 class ObjectError(ValueError):
@@ -66,6 +67,42 @@ def configured_fit(mask: np.ndarray, K: np.ndarray, plane: Plane, cfg: Reconstru
                           axial_view=cfg.axial_view)
 
 
+def open_mouth(fit: RevolutionFit, cfg: ReconstructConfig, mask: np.ndarray, K: np.ndarray,
+               plane: Plane, depth: np.ndarray | None) -> RevolutionFit | None:
+    """The fit as an open vessel (drinking glass, beaker, goblet), its mouth at the top of the
+    object frame with a wall and a floor inside, so the depth inside it is rendered rather than
+    a lid; None for a closed solid. A mouth is an end at least ``open_top_ratio`` of the widest
+    radius. Standing, the top is the mouth. Lying, either end may be (the wider first); an end
+    is taken open only when the raw ``depth`` says so: of the off-table readings that miss the
+    closed model's front surface, the open one takes in ``open_explains`` (and at least 5% of
+    all), as when the camera sees into the mouth. A mouth turned away changes nothing the
+    camera sees, and the model stays closed."""
+    if cfg.open_top_ratio <= 0:
+        return None
+    r = fit.profile[1:-1, 0]
+
+    def opened(f: RevolutionFit) -> RevolutionFit:
+        return replace(f, profile=open_vessel(f.profile[:-1], cfg.open_wall / f.height,
+                                              cfg.open_base / f.height))
+
+    def is_mouth(end: float) -> bool:
+        return end >= cfg.open_top_ratio * r.max()
+
+    if fit.resting == "standing":
+        return opened(fit) if is_mouth(r[-1]) else None
+    # the base end first: a lying fit's base is its wider end
+    mouths = [opened(f) for f, end in ((fit.flipped(), r[0]), (fit, r[-1])) if is_mouth(end)]
+    if not mouths or depth is None:
+        return None
+    xs, ys, raw = off_table_readings(mask, depth, K, plane, DEPTH_BAND, 400)
+    closed, *counts = [raw_support(f, xs, ys, raw, K, mask.shape, DEPTH_BAND)
+                       for f in [fit] + mouths]
+    best = int(np.argmax(counts))
+    gained = counts[best] - closed
+    return mouths[best] if gained >= max(cfg.open_explains * (len(xs) - closed),
+                                         0.05 * len(xs), 1) else None
+
+
 class Reconstructor:
     """One per batch: loads models or the library once; :meth:`__call__` per object."""
 
@@ -101,12 +138,9 @@ class Reconstructor:
             name, mesh = self.library.pick(label, fit.profile)
             meta["library_mesh"] = name
             return Reconstruction(mesh, meta)
-        profile = fit.profile
-        if cfg.open_top_ratio > 0 and fit.resting == "standing" and \
-                profile[-2, 0] >= cfg.open_top_ratio * profile[1:-1, 0].max():
-            # a wide mouth: drinking glass, beaker, goblet. Model it open, with a wall and a
-            # floor, so the depth inside the vessel is rendered, not a lid at the rim
-            profile = open_vessel(profile[:-1], cfg.open_wall / fit.height,
-                                  cfg.open_base / fit.height)
+        mouth = open_mouth(fit, cfg, mask, K, plane, depth if cfg.use_depth else None)
+        if mouth is not None:
             meta["open_top"] = True
-        return Reconstruction(revolve(profile, cfg.sections), meta)
+            meta["pose_hint"]["T_cam_obj"] = mouth.T_cam_obj.tolist()  # the mouth is the top
+            fit = mouth
+        return Reconstruction(revolve(fit.profile, cfg.sections), meta)

@@ -28,6 +28,8 @@ from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import hull_sides, revolve, silhouette
 from sr3d_cli.geometry.transforms import make_T, rotation_about
 
+DEPTH_BAND = 0.01  # metres: a raw reading this close to a model's front surface lies on it
+
 
 @dataclass
 class RevolutionFit:
@@ -41,6 +43,12 @@ class RevolutionFit:
     height: float
     resting: str
     iou: float
+
+    def flipped(self) -> "RevolutionFit":
+        """The same solid described from its other end (base and top swapped)."""
+        profile = np.column_stack([self.profile[::-1, 0], 1.0 - self.profile[::-1, 1]])
+        return RevolutionFit(profile, self.base + self.height * self.axis, -self.axis,
+                             self.height, self.resting, self.iou)
 
     @property
     def T_cam_obj(self) -> np.ndarray:
@@ -297,7 +305,7 @@ def _result(model: _Model, resting: str, iou: float) -> RevolutionFit:
     return RevolutionFit(profile, base, axis, model.height, resting, iou)
 
 
-def _off_table_readings(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, plane: Plane,
+def off_table_readings(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, plane: Plane,
                         band: float, samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixels (xs, ys) and raw depth of the mask's readings more than ``band`` above the table
     (those on it are see-through readings), at most ``samples`` of them, evenly spread."""
@@ -396,7 +404,7 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
 def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int = 40,
                    iterations: int = 12, lying_margin: float = 0.03,
                    allow_lying: bool = True, depth: np.ndarray | None = None,
-                   depth_band: float = 0.01, depth_min_points: int = 30,
+                   depth_band: float = DEPTH_BAND, depth_min_points: int = 30,
                    depth_vote: float = 2.0, vote_iou_gap: float = 0.06,
                    axial_view: float = 20.0, tilt_tolerance: float = 0.01) -> RevolutionFit:
     """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
@@ -417,7 +425,7 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     """
     readings = None
     if depth is not None:
-        xs, ys, raw = _off_table_readings(mask, depth, K, plane, depth_band, 400)
+        xs, ys, raw = off_table_readings(mask, depth, K, plane, depth_band, 400)
         readings = unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K)
     axial = readings is not None and axial_view_angle(mask, K, plane) < axial_view
 
