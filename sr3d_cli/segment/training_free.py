@@ -156,11 +156,14 @@ def opaque_edges(glass: np.ndarray, opaque: np.ndarray, *, reach: int = EDGE_REA
     count, labels = cv2.connectedComponents(glass.astype(np.uint8), connectivity=8)
     size = np.bincount(labels.ravel(), minlength=count)
     close = np.bincount(labels[near].ravel(), minlength=count)
-    inset = cv2.distanceTransform(glass.astype(np.uint8), cv2.DIST_L2, 3)
-    thickness = np.zeros(count)
-    np.maximum.at(thickness, labels.ravel(), inset.ravel())
-    edge = (close >= share * size) & (thickness <= thin)
+    edge = close >= share * size
     edge[0] = False
+    if edge.any():  # thickness: twice the largest distance to the component's edge
+        near_band = edge[labels]
+        inset = cv2.distanceTransform(near_band.astype(np.uint8), cv2.DIST_L2, 3)
+        thickness = np.zeros(count)
+        np.maximum.at(thickness, labels[near_band], inset[near_band])
+        edge &= thickness <= thin
     return edge[labels]
 
 
