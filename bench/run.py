@@ -123,7 +123,7 @@ def pose_errors(source, fid, aligner, plane_cfg) -> list[dict]:
     return rows
 
 
-GRASP_DRAWS = 4  # the planner's random draws of seed points (grasp.seed 0, 1, ...)
+GRASP_DRAWS = 8  # the planner's random draws of seed points (grasp.seed 0, 1, ...)
 
 
 def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
