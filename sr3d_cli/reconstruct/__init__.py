@@ -94,7 +94,7 @@ def open_mouth(fit: RevolutionFit, cfg: ReconstructConfig, mask: np.ndarray, K: 
     mouths = [opened(f) for f, end in ((fit.flipped(), r[0]), (fit, r[-1])) if is_mouth(end)]
     if not mouths or depth is None:
         return None
-    xs, ys, raw = off_table_readings(mask, depth, K, plane, DEPTH_BAND, 400)
+    xs, ys, raw = off_table_readings(mask, depth, K, plane)
     closed, *counts = [raw_support(f, xs, ys, raw, K, mask.shape, DEPTH_BAND)
                        for f in [fit] + mouths]
     best = int(np.argmax(counts))

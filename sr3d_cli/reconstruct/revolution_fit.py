@@ -306,7 +306,8 @@ def _result(model: _Model, resting: str, iou: float) -> RevolutionFit:
 
 
 def off_table_readings(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, plane: Plane,
-                        band: float, samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                       band: float = DEPTH_BAND, samples: int = 400
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixels (xs, ys) and raw depth of the mask's readings more than ``band`` above the table
     (those on it are see-through readings), at most ``samples`` of them, evenly spread."""
     ys, xs = np.nonzero(mask & (depth > 0))
@@ -425,7 +426,7 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     """
     readings = None
     if depth is not None:
-        xs, ys, raw = off_table_readings(mask, depth, K, plane, depth_band, 400)
+        xs, ys, raw = off_table_readings(mask, depth, K, plane, depth_band)
         readings = unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K)
     axial = readings is not None and axial_view_angle(mask, K, plane) < axial_view
 

@@ -158,12 +158,12 @@ def opaque_edges(glass: np.ndarray, opaque: np.ndarray, *, reach: int = EDGE_REA
     close = np.bincount(labels[near].ravel(), minlength=count)
     edge = close >= share * size
     edge[0] = False
-    if edge.any():  # thickness: twice the largest distance to the component's edge
+    if edge.any():  # half a component's thickness: its largest distance to its own edge
         near_band = edge[labels]
         inset = cv2.distanceTransform(near_band.astype(np.uint8), cv2.DIST_L2, 3)
-        thickness = np.zeros(count)
-        np.maximum.at(thickness, labels[near_band], inset[near_band])
-        edge &= thickness <= thin
+        half = np.zeros(count)
+        np.maximum.at(half, labels[near_band], inset[near_band])
+        edge &= half <= thin
     return edge[labels]
 
 
