@@ -76,7 +76,7 @@ def open_mouth(fit: RevolutionFit, cfg: ReconstructConfig, mask: np.ndarray, K: 
     is taken open only when the raw ``depth`` says so: of the off-table readings that miss the
     closed model's front surface, the open one takes in ``open_explains`` (and at least 5% of
     all), as when the camera sees into the mouth. A mouth turned away changes nothing the
-    camera sees, and the model stays closed."""
+    camera sees, and the model stays closed. ``depth`` is used when ``use_depth`` is on."""
     if cfg.open_top_ratio <= 0:
         return None
     r = fit.profile[1:-1, 0]
@@ -92,7 +92,7 @@ def open_mouth(fit: RevolutionFit, cfg: ReconstructConfig, mask: np.ndarray, K: 
         return opened(fit) if is_mouth(r[-1]) else None
     # the base end first: a lying fit's base is its wider end
     mouths = [opened(f) for f, end in ((fit.flipped(), r[0]), (fit, r[-1])) if is_mouth(end)]
-    if not mouths or depth is None:
+    if not mouths or depth is None or not cfg.use_depth:
         return None
     xs, ys, raw = off_table_readings(mask, depth, K, plane)
     closed, *counts = [raw_support(f, xs, ys, raw, K, mask.shape, DEPTH_BAND)
@@ -138,7 +138,7 @@ class Reconstructor:
             name, mesh = self.library.pick(label, fit.profile)
             meta["library_mesh"] = name
             return Reconstruction(mesh, meta)
-        mouth = open_mouth(fit, cfg, mask, K, plane, depth if cfg.use_depth else None)
+        mouth = open_mouth(fit, cfg, mask, K, plane, depth)
         if mouth is not None:
             meta["open_top"] = True
             meta["pose_hint"]["T_cam_obj"] = mouth.T_cam_obj.tolist()  # the mouth is the top
