@@ -55,6 +55,21 @@ def test_standing_cylinder_recovered(elevation):
     assert fit.iou > 0.95
 
 
+def test_seen_from_steeply_above_a_flask_keeps_its_neck():
+    # a conical flask seen 18 degrees off its axis: its body covers the lower neck in the
+    # outline, which then says nothing of the neck's width; it must not pinch it shut
+    plane = _table(72.0, 0.6)
+    base = plane.intersect(np.array([0.0, 0.03, 1.0]))
+    h, body, neck = 0.15, 0.048, 0.014
+    prof = np.array([[0, 0], [body, 0], [neck, 0.65 * h], [neck, h], [0, h]])
+    fit = fit_revolution(_render(prof, base, plane.normal), K, plane)
+    assert fit.resting == "standing"
+    assert fit.height == pytest.approx(h, rel=0.05)
+    r, z = fit.profile[1:-1, 0] * fit.height, fit.profile[1:-1, 1] * fit.height
+    upper = r[z > 0.7 * h]
+    assert upper.min() > 0.7 * neck and upper.max() < 1.4 * neck, upper / neck
+
+
 def test_lying_bottle_recovered_with_its_base_at_the_wide_end():
     plane = _table(45.0, 0.55)
     axis = np.array([1.0, 0, 0]) - (np.array([1.0, 0, 0]) @ plane.normal) * plane.normal
