@@ -124,6 +124,34 @@ def pose_errors(source, fid, aligner, plane_cfg) -> list[dict]:
 
 
 GRASP_DRAWS = 8  # the planner's random draws of seed points (grasp.seed 0, 1, ...)
+HELD_OUT_SEED = 1100  # read only as the totals below: see heldout_bench
+
+
+def _planners(cfg: Config) -> list:
+    """One planner per random draw of seed points (:data:`GRASP_DRAWS`)."""
+    import copy
+
+    from sr3d_cli.grasp.planner import Planner
+
+    planners = []
+    for seed in range(GRASP_DRAWS):
+        grasp_cfg = copy.copy(cfg.grasp)
+        grasp_cfg.seed = seed
+        planners.append(Planner(grasp_cfg))
+    return planners
+
+
+def _over_draws(by_draw: list[list[dict]]) -> dict:
+    """Grasp numbers over frames for each draw, and their mean over draws."""
+    from sr3d_cli.grasp.quality import overall
+
+    draws = [overall(frames) for frames in by_draw]
+    top1 = [d["top1_success"] for d in draws]
+    return {"objects": draws[0]["objects"],
+            "objects_with_grasps": float(np.mean([d["objects_with_grasps"] for d in draws])),
+            "top1_success": float(np.mean(top1)),
+            "top10_success": float(np.mean([d["top10_success"] for d in draws])),
+            "top1_by_draw": top1, "draws": draws}
 
 
 def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
@@ -131,20 +159,12 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
     raw depth with the same masks, judged against the true meshes; grasp stage time. The
     repaired scene is planned with :data:`GRASP_DRAWS` seeds: which surface points are tried is
     random, and one draw's top-1 moves by several objects, so the mean is the number to quote."""
-    import copy
-    import shutil
-
-    from sr3d_cli.grasp.planner import Planner
     from sr3d_cli.grasp.quality import overall
     from sr3d_cli.io.images import write_depth
 
-    planners = []
-    for seed in range(GRASP_DRAWS):
-        grasp_cfg = copy.copy(cfg.grasp)
-        grasp_cfg.seed = seed
-        planners.append(Planner(grasp_cfg))
-    frames: dict[str, list] = {"raw": [], **{f"repaired/{s}": [] for s in range(GRASP_DRAWS)}}
-    seconds = []
+    planners = _planners(cfg)
+    by_draw: list[list[dict]] = [[] for _ in planners]
+    raw_frames, seconds = [], []
     for source in discover_scenes(synth, IOConfig(), None):
         fid = "000000"
         staged = type(source)(source.root, out=work / "synthetic" / "sr3d" / source.name,
@@ -152,28 +172,56 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
         frame = staged.load_frame(fid)
         depth, _ = Pipeline(cfg).repaired_depth(frame)
         write_depth(staged.output_path("repaired", fid), depth, frame.camera.depth_scale)
+        for planner, frames in zip(planners, by_draw):
+            t = time.perf_counter()
+            stages.grasp_frame(staged.load_frame(fid), planner, cfg.plane, "repaired")
+            seconds.append(time.perf_counter() - t)
+            frames.append(stages.evaluate_grasp_frame(staged, fid, cfg))
         raw = type(source)(source.root, out=work / "grasp_raw" / source.name, name=source.name,
                            io=source.io)
         (raw.out / "masks").mkdir(parents=True, exist_ok=True)
         shutil.copy(staged.stage_file("masks", fid, (".png",)), raw.out / "masks" / f"{fid}.png")
-        runs = [(f"repaired/{s}", staged, p, "repaired") for s, p in enumerate(planners)]
-        for name, scene, planner, depth_from in runs + [("raw", raw, planners[0], "raw")]:
-            t = time.perf_counter()
-            stages.grasp_frame(scene.load_frame(fid), planner, cfg.plane, depth_from)
-            if depth_from == "repaired":
-                seconds.append(time.perf_counter() - t)
-            frames[name].append(stages.evaluate_grasp_frame(scene, fid, cfg))
-        print("grasp", source.name, " ".join(
-            f"{k}: top1 {v[-1]['top1_success']:.2f}" for k, v in frames.items()), file=sys.stderr)
-    draws = [overall(frames[f"repaired/{s}"]) for s in range(GRASP_DRAWS)]
-    top1 = [d["top1_success"] for d in draws]
-    repaired = {"objects": draws[0]["objects"],
-                "objects_with_grasps": float(np.mean([d["objects_with_grasps"] for d in draws])),
-                "top1_success": float(np.mean(top1)),
-                "top10_success": float(np.mean([d["top10_success"] for d in draws])),
-                "top1_by_draw": top1, "draws": draws}
+        stages.grasp_frame(raw.load_frame(fid), planners[0], cfg.plane, "raw")
+        raw_frames.append(stages.evaluate_grasp_frame(raw, fid, cfg))
+        print("grasp", source.name, f"repaired/0 top1 {by_draw[0][-1]['top1_success']:.2f}",
+              f"raw top1 {raw_frames[-1]['top1_success']:.2f}", file=sys.stderr)
     return {"friction": cfg.grasp.friction, "median_seconds": float(np.median(seconds)),
-            "repaired": repaired, "raw": overall(frames["raw"])}
+            "repaired": _over_draws(by_draw), "raw": overall(raw_frames)}
+
+
+def heldout_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict:
+    """The whole default pipeline (segment -> reconstruct -> align -> repair -> grasp) on a
+    generated set of seed :data:`HELD_OUT_SEED`. The seed-700 set is where sr3d's parameters
+    were tuned, so its numbers flatter; seed 900 is where failures are looked into; this set's
+    frames are not to be looked at one by one, so its totals stay the ones to expect on new
+    frames (once a change is chosen by them, pick a new seed)."""
+    from sr3d_cli.io.images import write_depth
+
+    folder = work / f"heldout{HELD_OUT_SEED}"
+    generated_set(folder, frames, SynthConfig(seed=HELD_OUT_SEED, views=1), renderer)
+    out = work / f"heldout{HELD_OUT_SEED}_out"
+    shutil.rmtree(out, ignore_errors=True)
+    planners = _planners(cfg)
+    by_draw: list[list[dict]] = [[] for _ in planners]
+    rows = []
+    for source in discover_scenes(folder, IOConfig(), out):
+        fid = "000000"
+        frame = source.load_frame(fid)
+        pipeline = Pipeline(cfg)
+        pipeline.ensure_upstream(frame)
+        depth, _ = pipeline.repaired_depth(frame)
+        write_depth(source.output_path("repaired", fid), depth, frame.camera.depth_scale)
+        gt = source.load_gt_depth(fid, depth.shape)
+        rows.append(depth_metrics(depth, gt, source.load_mask(source.gt_mask_path(fid),
+                                                             depth.shape) > 0))
+        for planner, done in zip(planners, by_draw):
+            stages.grasp_frame(frame, planner, cfg.plane, "repaired")
+            done.append(stages.evaluate_grasp_frame(source, fid, cfg))
+        print("held-out", source.name, f"MAE {1000 * rows[-1]['mae']:.1f} mm",
+              f"top1/0 {by_draw[0][-1]['top1_success']:.2f}", file=sys.stderr)
+    return {"seed": HELD_OUT_SEED, "frames": len(rows), "depth": mean_metrics(rows),
+            "median_mae": float(np.median([r["mae"] for r in rows])),
+            "grasp": _over_draws(by_draw)}
 
 
 def scale_bench(synth: Path, work: Path, frames: int = 12, repeats: int = 3) -> dict:
@@ -305,21 +353,23 @@ def mesh_bench(synth: Path) -> dict:
     return result
 
 
-SECTIONS = ("depth", "poses", "grasp", "scale", "speed", "mesh")
+SECTIONS = ("depth", "poses", "grasp", "heldout", "scale", "speed", "mesh")
 
 
 def main(frames: int = 24, sections: tuple[str, ...] = SECTIONS) -> None:
     work = ROOT / "work"
     synth = work / "synth700"
     cfg = SynthConfig(seed=700, views=1)
-    generated_set(synth, frames, cfg, make_renderer("auto"))
+    renderer = make_renderer("auto")
+    generated_set(synth, frames, cfg, renderer)
     default = Config()
     paper = Config()
     paper.align.mode = "paper"
     paper.align.rolls = 4  # 162 viewpoints x 4 rolls: 12 rolls triples a run already ~10 min
     previous = ROOT / "results.json"
     results = json.loads(previous.read_text()) if previous.is_file() else {}
-    for key in ("synthetic", "real", "poses", "timings", "grasp", "scale", "speed", "mesh"):
+    for key in ("synthetic", "real", "poses", "timings", "grasp", "heldout", "scale", "speed",
+                "mesh"):
         results.setdefault(key, {})
     methods = ("raw", "plane-fill", "inpaint", "paper", "sr3d")
     for label, root, masks in (("synthetic", synth, "segment"), ("real", REAL, "import")):
@@ -362,6 +412,8 @@ def main(frames: int = 24, sections: tuple[str, ...] = SECTIONS) -> None:
                for k in ("rotation_deg", "translation_mm", "scale_pct", "seconds")}}
     if "grasp" in sections:
         results["grasp"] = grasp_bench(synth, work, default)
+    if "heldout" in sections:
+        results["heldout"] = heldout_bench(work, default, renderer)
     if "scale" in sections:
         results["scale"] = scale_bench(synth, work)
     if "speed" in sections:
@@ -426,6 +478,21 @@ def write_report(results: dict, methods) -> None:
                   f"random draws of seed points (`grasp.seed` 0, 1, ...); top-1 by draw: "
                   f"{by_draw}; raw: draw 0",
                   f"- grasp stage, median seconds per frame: {grasp['median_seconds']:.3f}", ""]
+    held = results.get("heldout", {})
+    if held:
+        d, g = held["depth"], held["grasp"]
+        lines += [f"## held-out set (seed {held['seed']}: read only as these totals)", "",
+                  f"{held['frames']} generated frames, the whole default pipeline from the raw "
+                  "frame (sr3d's own masks) to grasps, judged as above. The seed-700 set above "
+                  "is the one sr3d's parameters were tuned on and seed 900 the one failures are "
+                  "studied on; expect these numbers on new frames.", "",
+                  "| objects | REL | MAE mm | median MAE mm | grasp top-1 | top-10 |",
+                  "|---|---|---|---|---|---|",
+                  f"| {g['objects']} | {d['rel']:.4f} | {1000 * d['mae']:.1f} | "
+                  f"{1000 * held['median_mae']:.1f} | {g['top1_success']:.3f} | "
+                  f"{g['top10_success']:.3f} |", "",
+                  "- grasp top-1 by draw: " + ", ".join(f"{v:.3f}" for v in g["top1_by_draw"]),
+                  ""]
     mesh = results.get("mesh", {})
     if mesh:
         lines += ["## segmentation and reconstruction (default backends)", "",
@@ -490,7 +557,8 @@ def plot(results: dict, methods) -> None:
 
 
 if __name__ == "__main__":
-    # sections to run (default all): depth poses grasp scale speed mesh; others' results are kept
+    # sections to run (default all): depth poses grasp heldout scale speed mesh; others' results
+    # are kept
     unknown = set(sys.argv[1:]) - set(SECTIONS)
     if unknown:
         sys.exit(f"unknown section(s) {sorted(unknown)}; choose from {SECTIONS}")
