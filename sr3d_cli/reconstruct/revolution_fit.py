@@ -99,6 +99,11 @@ class _Frame:
         return cv2.warpAffine(window.astype(np.uint8), self.M, (self.size, self.size),
                               flags=cv2.INTER_NEAREST) > 0
 
+    def draw(self, model: "_Model", K: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        """The model's silhouette in the image ``shape``, as seen in this window."""
+        sil = silhouette(model.centres(), model.axis, model.radii, K, shape)
+        return self.warp(sil[self.y0:self.y0 + self.shape[0], self.x0:self.x0 + self.shape[1]])
+
     def point(self, uv: np.ndarray) -> np.ndarray:
         """Image pixel(s) (n, 2) to rotated-window coordinates (n, 2)."""
         uv = np.atleast_2d(uv) - [self.x0, self.y0]
@@ -145,9 +150,7 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
                                                            * model.axis)[None], K)[0]
         up = _unit(c1 - c0) if np.linalg.norm(c1 - c0) > 1e-6 else np.array([0.0, -1.0])
         frame = _Frame(mask, (c0 + c1) / 2, up, pad=8)
-        sil = silhouette(model.centres(), model.axis, model.radii, K, mask.shape)
-        ren = frame.warp(sil[frame.y0:frame.y0 + frame.shape[0],
-                             frame.x0:frame.x0 + frame.shape[1]])
+        ren = frame.draw(model, K, mask.shape)
         if it == iterations or not ren.any():
             break
         rows = frame.point(project(model.centres(), K))[:, 1]
@@ -207,14 +210,13 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
                 lift = model.radii.max() - plane.height(model.base[None])[0]
                 model.base = model.base + lift * n
     if ren.any():
+        # a level whose own width falls short of the drawn width on its row (2 px) is hidden
         centres = model.centres()
         drawn = _widths(ren, frame.point(project(centres, K))[:, 1])
         hidden = 2 * model.radii * K[0, 0] / centres[:, 2] < drawn - 2
         if hidden.any():
             model.radii = _fill_hidden(model.radii, hidden)
-            sil = silhouette(centres, model.axis, model.radii, K, mask.shape)
-            ren = frame.warp(sil[frame.y0:frame.y0 + frame.shape[0],
-                                 frame.x0:frame.x0 + frame.shape[1]])
+            ren = frame.draw(model, K, mask.shape)
     inter = (frame.obs & ren).sum()
     union = (frame.obs | ren).sum()
     return model, float(inter / union) if union else 0.0
@@ -433,7 +435,7 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
                    allow_lying: bool = True, depth: np.ndarray | None = None,
                    depth_band: float = DEPTH_BAND, depth_min_points: int = 30,
                    depth_vote: float = 2.0, vote_iou_gap: float = 0.06,
-                   axial_view: float = 20.0, axial_iou_gap: float = 0.03,
+                   axial_view: float = 25.0, axial_iou_gap: float = 0.03,
                    tilt_tolerance: float = 0.01) -> RevolutionFit:
     """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
 
