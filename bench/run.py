@@ -154,6 +154,19 @@ def _over_draws(by_draw: list[list[dict]]) -> dict:
             "top1_by_draw": top1, "draws": draws}
 
 
+def _plan_draws(source, fid: str, planners: list, by_draw: list[list[dict]], cfg: Config
+                ) -> list[float]:
+    """Plan the frame's repaired scene with each planner (one per draw), judge each plan into
+    its draw's list; returns the seconds of each plan (frame loading included)."""
+    seconds = []
+    for planner, frames in zip(planners, by_draw):
+        t = time.perf_counter()
+        stages.grasp_frame(source.load_frame(fid), planner, cfg.plane, "repaired")
+        seconds.append(time.perf_counter() - t)
+        frames.append(stages.evaluate_grasp_frame(source, fid, cfg))
+    return seconds
+
+
 def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
     """Grasps planned on the repaired scene (from the sr3d depth run's stage outputs) and on the
     raw depth with the same masks, judged against the true meshes; grasp stage time. The
@@ -172,11 +185,7 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
         frame = staged.load_frame(fid)
         depth, _ = Pipeline(cfg).repaired_depth(frame)
         write_depth(staged.output_path("repaired", fid), depth, frame.camera.depth_scale)
-        for planner, frames in zip(planners, by_draw):
-            t = time.perf_counter()
-            stages.grasp_frame(staged.load_frame(fid), planner, cfg.plane, "repaired")
-            seconds.append(time.perf_counter() - t)
-            frames.append(stages.evaluate_grasp_frame(staged, fid, cfg))
+        seconds += _plan_draws(staged, fid, planners, by_draw, cfg)
         raw = type(source)(source.root, out=work / "grasp_raw" / source.name, name=source.name,
                            io=source.io)
         (raw.out / "masks").mkdir(parents=True, exist_ok=True)
@@ -214,9 +223,7 @@ def heldout_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict:
         gt = source.load_gt_depth(fid, depth.shape)
         rows.append(depth_metrics(depth, gt, source.load_mask(source.gt_mask_path(fid),
                                                              depth.shape) > 0))
-        for planner, done in zip(planners, by_draw):
-            stages.grasp_frame(frame, planner, cfg.plane, "repaired")
-            done.append(stages.evaluate_grasp_frame(source, fid, cfg))
+        _plan_draws(source, fid, planners, by_draw, cfg)
         print("held-out", source.name, f"MAE {1000 * rows[-1]['mae']:.1f} mm",
               f"top1/0 {by_draw[0][-1]['top1_success']:.2f}", file=sys.stderr)
     return {"seed": HELD_OUT_SEED, "frames": len(rows), "depth": mean_metrics(rows),
@@ -368,8 +375,7 @@ def main(frames: int = 24, sections: tuple[str, ...] = SECTIONS) -> None:
     paper.align.rolls = 4  # 162 viewpoints x 4 rolls: 12 rolls triples a run already ~10 min
     previous = ROOT / "results.json"
     results = json.loads(previous.read_text()) if previous.is_file() else {}
-    for key in ("synthetic", "real", "poses", "timings", "grasp", "heldout", "scale", "speed",
-                "mesh"):
+    for key in ("synthetic", "real", "timings", *SECTIONS[1:]):  # the depth section's three
         results.setdefault(key, {})
     methods = ("raw", "plane-fill", "inpaint", "paper", "sr3d")
     for label, root, masks in (("synthetic", synth, "segment"), ("real", REAL, "import")):
