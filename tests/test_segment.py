@@ -91,6 +91,32 @@ def test_dropouts_beyond_the_table_are_not_objects(synth_set, monkeypatch):
     assert len(ungated.objects) > len(inst.objects)
 
 
+def test_a_glass_rising_above_the_tables_far_edge_keeps_its_outline(synth_set):
+    """No readings beyond the table's far edge (the room is out of range), and that edge cuts
+    the highest object in each frame 30 % down its outline: its outline of holes joins the
+    room's and must not be dropped with it. Measured: cut objects' mean IoU 0.73, all objects
+    0.81; with the holes judged as one (the code before) 0.67 and 0.74, one object at 0.31."""
+    from sr3d_cli.config import IOConfig
+    from sr3d_cli.io.formats import discover_scenes
+
+    segmenter = Segmenter(SegmentConfig(), PlaneConfig())
+    cut_ious, all_ious = [], []
+    for source in discover_scenes(synth_set, IOConfig(), None):
+        fid = source.frame_ids()[0]
+        frame = source.load_frame(fid)
+        gt = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
+        rows = {k: np.nonzero((gt == k).any(axis=1))[0] for k in np.unique(gt) if k}
+        top = min(rows, key=lambda k: rows[k].min())
+        depth = frame.depth_m.copy()
+        depth[:int(rows[top].min() + 0.3 * np.ptp(rows[top]))] = 0
+        found = instance_ious(segmenter(fid, frame.rgb, depth, frame.camera.K).ids, gt)
+        cut_ious.append(found.get(top, 0.0))
+        all_ious += list(found.values())
+    assert min(cut_ious) >= 0.5
+    assert np.mean(cut_ious) >= 0.72
+    assert np.mean(all_ious) >= 0.78
+
+
 def _silhouettes(placements):
     """Instance ids of solids of revolution standing on a table seen from 55 degrees.
     placements: (profile, height m, x m, y m on the table)."""

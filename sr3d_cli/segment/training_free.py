@@ -7,7 +7,8 @@ The steps:
 
 1. heights above the fitted support plane for every valid reading;
 2. evidence of glass: holes where the table should be seen, plus rough readings above the table
-   (the local residual against a median filter is far above the sensor's noise there);
+   (the local residual against a median filter is far above the sensor's noise there); the
+   room's holes beyond the table are dropped, but not a glass outline joined to them;
 3. opaque evidence: smooth readings clearly above the table (these veto a candidate); the thin
    runs of missing readings along an opaque object's edge (a stereo camera's shadow) are its,
    not glass, so a glass next to a can does not take in the table between them;
@@ -35,6 +36,9 @@ from sr3d_cli.geometry.plane import Plane
 
 ON_TABLE_SHARE = 0.3  # least share of a candidate over the table's footprint
 SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (split_touching)
+BORDER_REACH = 0.1  # share of the image width along its sides where holes may be the
+# camera's own (a stereo camera's invalid left band is baseline x fx / depth wide: ~100 px at
+# 0.5 m for a D415 at 1280 px); see evidence_maps
 EDGE_REACH, EDGE_SHARE, EDGE_THIN = 8, 0.8, 4.0  # an opaque object's edge band (opaque_edges)
 
 
@@ -50,17 +54,25 @@ def _disk(radius: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
 
+def _near_border(stats: np.ndarray, shape: tuple[int, int], reach_x: int, reach_y: int
+                 ) -> np.ndarray:
+    """``(count,) bool``: which components' boxes (``cv2.connectedComponentsWithStats`` stats)
+    come within ``reach_x`` pixels of the image's left or right side or ``reach_y`` of its top
+    or bottom."""
+    x, y, bw, bh = (stats[:, k] for k in range(4))
+    return ((np.minimum(x, shape[1] - x - bw) <= reach_x)
+            | (np.minimum(y, shape[0] - y - bh) <= reach_y))
+
+
 def _border_artefacts(holes: np.ndarray, max_share: float) -> np.ndarray:
     """Hole components that touch the image border and are too big or too elongated to be an
     object (beyond the table's range, the stereo camera's invalid left band)."""
     h, w = holes.shape
     count, labels, stats, _ = cv2.connectedComponentsWithStats(holes.astype(np.uint8), 8)
-    drop = np.zeros(count, bool)
-    for k in range(1, count):
-        x, y, bw, bh, area = stats[k]
-        touches = x == 0 or y == 0 or x + bw == w or y + bh == h
-        if touches and (area > max_share * h * w or bh > 0.6 * h or bw > 0.6 * w):
-            drop[k] = True
+    bw, bh, area = stats[:, 2], stats[:, 3], stats[:, 4]
+    drop = _near_border(stats, holes.shape, 0, 0) & (
+        (area > max_share * h * w) | (bh > 0.6 * h) | (bw > 0.6 * w))
+    drop[0] = False
     return drop[labels]
 
 
@@ -127,12 +139,22 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     clearly above the table. Footprint: :func:`table_footprint`.
     """
     valid = depth_m > 0
-    plane_z = plane.depth_image(depth_m.shape, K)
-    holes = ~valid & (plane_z > 0)
-    holes &= ~_border_artefacts(holes, max_object_share)
     height = np.where(valid, plane.height(depth_to_points(depth_m, K)), 0.0)
     rough = roughness(depth_m)
     on_table = valid & (np.abs(height) < 0.004 * np.maximum(depth_m, 0.3) ** 2 + 0.002)
+    footprint = table_footprint(on_table)
+    holes = ~valid & (plane.depth_image(depth_m.shape, K) > 0)
+    artefact = _border_artefacts(holes, max_object_share)
+    # a glass rising above the table's far edge joins its outline of holes to the room's: the
+    # parts of an artefact well inside the table's footprint are kept if they reach down into
+    # it (taller than wide, as an outline standing on the table is; the table's ragged far
+    # edge runs across) and stay away from the image's sides (a stereo camera's invalid band)
+    inner = artefact & (cv2.erode(footprint.astype(np.uint8), _disk(3)) > 0)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(inner.astype(np.uint8), 8)
+    kept = ~_near_border(stats, holes.shape, int(BORDER_REACH * holes.shape[1]), 0)
+    kept &= stats[:, cv2.CC_STAT_HEIGHT] >= stats[:, cv2.CC_STAT_WIDTH]
+    kept[0] = False
+    holes &= ~artefact | kept[labels]
     expected = table_noise_model(rough, depth_m, on_table)
     above = valid & (height > np.maximum(4 * expected, 0.004))
     is_rough = rough > rough_factor * expected
@@ -140,7 +162,7 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     opaque = above & ~is_rough
     opaque = cv2.morphologyEx(opaque.astype(np.uint8), cv2.MORPH_OPEN, _disk(2)) > 0
     glass &= ~opaque_edges(glass, opaque)
-    return glass, opaque, table_footprint(on_table)
+    return glass, opaque, footprint
 
 
 def opaque_edges(glass: np.ndarray, opaque: np.ndarray, *, reach: int = EDGE_REACH,
