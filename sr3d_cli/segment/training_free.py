@@ -39,6 +39,7 @@ SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (split
 BORDER_REACH = 0.1  # share of the image width along its sides where holes may be the
 # camera's own (a stereo camera's invalid left band is baseline x fx / depth wide: ~100 px at
 # 0.5 m for a D415 at 1280 px); see evidence_maps
+ENCLOSED_SHARE = 0.8  # share of a gap's surroundings the region must hold to fill it (_enclosed)
 EDGE_REACH, EDGE_SHARE, EDGE_THIN = 8, 0.8, 4.0  # an opaque object's edge band (opaque_edges)
 
 
@@ -189,11 +190,36 @@ def opaque_edges(glass: np.ndarray, opaque: np.ndarray, *, reach: int = EDGE_REA
     return edge[labels]
 
 
+def _enclosed(region: np.ndarray, reach: int, share: float = ENCLOSED_SHARE) -> np.ndarray:
+    """``(H, W) bool``: gaps nearly closed in by ``region``: what its closing by a disc of
+    radius ``reach`` adds or encloses, ``share`` of the pixels around which are the region's.
+    An outline of holes with a narrow opening (where the evidence thins out, at the table's far
+    edge or a bright reflection) has its inside filled; the table boxed in by two objects is
+    open over more of its edge. (A slit narrower than the closing between two objects is
+    filled, as :func:`merge_pieces` joins such pieces anyway; :func:`split_touching` parts
+    them.)"""
+    closed = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_CLOSE, _disk(reach)) > 0
+    gaps = ndimage.binary_fill_holes(closed) & ~region
+    count, labels = cv2.connectedComponents(gaps.astype(np.uint8), connectivity=4)
+    if count < 2:
+        return gaps
+    # the pixels just outside each gap, labelled with its number (with two gaps side by side,
+    # the larger number's)
+    ring = cv2.dilate(labels.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int32)
+    ring[gaps] = 0
+    held = np.bincount(ring[region].ravel(), minlength=count)
+    around = np.bincount(ring.ravel(), minlength=count)
+    keep = held >= share * np.maximum(around, 1)
+    keep[0] = False
+    return keep[labels]
+
+
 def find_candidates(glass: np.ndarray, opaque: np.ndarray, *, min_area: int,
                     close_radius: int) -> list[np.ndarray]:
-    """Connected regions of glass evidence, closed and filled, without opaque parts."""
+    """Connected regions of glass evidence, closed and filled (holes and nearly closed gaps,
+    :func:`_enclosed`), without opaque parts."""
     region = cv2.morphologyEx(glass.astype(np.uint8), cv2.MORPH_CLOSE, _disk(close_radius)) > 0
-    region = ndimage.binary_fill_holes(region)
+    region = ndimage.binary_fill_holes(region | _enclosed(region, 2 * close_radius))
     veto = cv2.dilate(opaque.astype(np.uint8), _disk(2)) > 0
     region &= ~veto
     region = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_OPEN, _disk(3)) > 0
