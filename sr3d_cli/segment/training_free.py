@@ -12,9 +12,9 @@ The steps:
 3. opaque evidence: smooth readings clearly above the table (these veto a candidate); the thin
    runs of missing readings along an opaque object's edge (a stereo camera's shadow) are its,
    not glass, so a glass next to a can does not take in the table between them;
-4. candidates: morphological closing of the evidence, filling of regions enclosed by it (an
-   outline of holes around a see-through object), opening to drop thin artefacts such as the
-   dropouts along opaque edges, and an area floor;
+4. candidates: morphological closing of the evidence, filling of regions enclosed or nearly
+   enclosed by it (an outline of holes around a see-through object), opening to drop thin
+   artefacts such as the dropouts along opaque edges, and an area floor;
 5. each candidate refined by GrabCut in a window around it (colour edges), seeded with the
    evidence as probable foreground and the opaque pixels as background;
 6. a region of touching objects split at its narrow necks (distance-transform watershed), kept
