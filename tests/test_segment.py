@@ -140,8 +140,8 @@ def test_an_outline_with_a_narrow_opening_is_filled_but_not_the_table_between_ob
 
 
 def _silhouettes(placements):
-    """Instance ids of solids of revolution standing on a table seen from 55 degrees.
-    placements: (profile, height m, x m, y m on the table)."""
+    """Instance ids and depth (metres, 0 off the objects) of solids of revolution standing on a
+    table seen from 55 degrees. placements: (profile, height m, x m, y m on the table)."""
     from sr3d_cli.geometry.camera import Camera
     from sr3d_cli.geometry.plane import Plane
     from sr3d_cli.geometry.revolution import revolve
@@ -160,15 +160,15 @@ def _silhouettes(placements):
         m = revolve(np.asarray(profile) / height)
         base = centre + x * x_dir + y * y_dir
         meshes.append(RenderMesh(m.vertices @ (height * R).T + base, np.asarray(m.faces), k))
-    ids = make_renderer("numpy").render(meshes, Camera(K, 640, 480)).ids
-    return ids, K, plane
+    out = make_renderer("numpy").render(meshes, Camera(K, 640, 480))
+    return out.ids, K, plane, out.depth.astype(np.float64)
 
 
 def test_touching_glasses_are_split_but_a_goblet_is_not():
     from sr3d_cli.segment.training_free import split_touching
 
     glass = [[0, 0], [0.03, 0], [0.033, 0.1], [0, 0.1]]
-    ids, K, plane = _silhouettes([(glass, 0.1, -0.032, 0.0), (glass, 0.1, 0.034, 0.01)])
+    ids, K, plane, _ = _silhouettes([(glass, 0.1, -0.032, 0.0), (glass, 0.1, 0.034, 0.01)])
     region = ids > 0
     parts = split_touching(region, K, plane)
     assert len(parts) == 2
@@ -176,8 +176,37 @@ def test_touching_glasses_are_split_but_a_goblet_is_not():
     assert min(ious.values()) > 0.9
     goblet = [[0, 0], [0.035, 0], [0.033, 0.004], [0.005, 0.01], [0.005, 0.07], [0.03, 0.09],
               [0.04, 0.13], [0.036, 0.16], [0, 0.16]]
-    ids, K, plane = _silhouettes([(goblet, 0.16, 0.0, 0.0)])
+    ids, K, plane, _ = _silhouettes([(goblet, 0.16, 0.0, 0.0)])
     assert len(split_touching(ids > 0, K, plane)) == 1
+
+
+def test_a_vial_against_a_glass_is_split_by_the_readings_but_a_goblet_or_bottle_is_not():
+    """A thin vial touching a glass's side has no neck the watershed could cut at, and the
+    outline alone does not split them; the raw readings on the vial (a sensor's sparse front-
+    surface returns, here 30% of the pixels) lie off any single solid's surface. A goblet's
+    stem and foot and a bottle's neck hang off their bodies the same way, and their readings
+    lie on the one solid: they stay whole."""
+    from sr3d_cli.segment.training_free import split_touching
+
+    def sparse(depth):
+        return np.where(np.random.default_rng(0).random(depth.shape) < 0.3, depth, 0.0)
+
+    glass = [[0, 0], [0.03, 0], [0.033, 0.1], [0, 0.1]]
+    vial = [[0, 0], [0.011, 0], [0.011, 0.06], [0.009, 0.065], [0.009, 0.075], [0, 0.075]]
+    ids, K, plane, depth = _silhouettes([(glass, 0.1, 0.0, 0.0), (vial, 0.075, 0.042, -0.01)])
+    region = ids > 0
+    assert cv2.connectedComponents(region.astype(np.uint8))[0] == 2  # one region
+    assert len(split_touching(region, K, plane)) == 1
+    parts = split_touching(region, K, plane, depth=sparse(depth))
+    assert len(parts) == 2
+    ious = instance_ious(np.argmax(np.stack([np.zeros_like(region)] + parts), 0), ids)
+    assert min(ious.values()) > 0.95
+    goblet = [[0, 0], [0.035, 0], [0.033, 0.004], [0.005, 0.01], [0.005, 0.07], [0.03, 0.09],
+              [0.04, 0.13], [0.036, 0.16], [0, 0.16]]
+    bottle = [[0, 0], [0.035, 0], [0.035, 0.14], [0.012, 0.18], [0.012, 0.22], [0, 0.22]]
+    for profile, height in ((goblet, 0.16), (bottle, 0.22)):
+        ids, K, plane, depth = _silhouettes([(profile, height, 0.0, 0.0)])
+        assert len(split_touching(ids > 0, K, plane, depth=sparse(depth))) == 1
 
 
 def test_a_goblet_whose_foot_meets_a_flask_is_split_between_them():
@@ -190,7 +219,7 @@ def test_a_goblet_whose_foot_meets_a_flask_is_split_between_them():
               [0.04, 0.13], [0.036, 0.16], [0, 0.16]]
     flask = [[0, 0], [0.045, 0], [0.047, 0.01], [0.04, 0.06], [0.012, 0.1], [0.012, 0.13],
              [0, 0.13]]
-    ids, K, plane = _silhouettes([(goblet, 0.16, 0.0, 0.0), (flask, 0.13, 0.05, -0.07)])
+    ids, K, plane, _ = _silhouettes([(goblet, 0.16, 0.0, 0.0), (flask, 0.13, 0.05, -0.07)])
     assert len(np.unique(ids)) == 3
     region = ids > 0
     assert cv2.connectedComponents(region.astype(np.uint8))[0] == 2  # one region

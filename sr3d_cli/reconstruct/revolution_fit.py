@@ -29,6 +29,7 @@ from sr3d_cli.geometry.revolution import hull_sides, revolve, silhouette
 from sr3d_cli.geometry.transforms import make_T, rotation_about
 
 DEPTH_BAND = 0.01  # metres: a raw reading this close to a model's front surface lies on it
+DEPTH_MIN_POINTS = 30  # fewest readings on a surface that count as evidence
 
 
 @dataclass
@@ -433,7 +434,7 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
 def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int = 40,
                    iterations: int = 12, lying_margin: float = 0.03,
                    allow_lying: bool = True, depth: np.ndarray | None = None,
-                   depth_band: float = DEPTH_BAND, depth_min_points: int = 30,
+                   depth_band: float = DEPTH_BAND, depth_min_points: int = DEPTH_MIN_POINTS,
                    depth_vote: float = 2.0, vote_iou_gap: float = 0.06,
                    axial_view: float = 25.0, axial_iou_gap: float = 0.03,
                    tilt_tolerance: float = 0.01) -> RevolutionFit:

@@ -36,6 +36,8 @@ from sr3d_cli.geometry.plane import Plane
 
 ON_TABLE_SHARE = 0.3  # least share of a candidate over the table's footprint
 SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (split_touching)
+SPLIT_READINGS = 0.25  # share of the whole's readings on its surface a split must add (ditto)
+SPLIT_PART_IOU = 0.85  # silhouette IoU both parts of a split made by the readings must reach
 BORDER_REACH = 0.1  # share of the image width along its sides where holes may be the
 # camera's own (a stereo camera's invalid left band is baseline x fx / depth wide: ~100 px at
 # 0.5 m for a D415 at 1280 px); see evidence_maps
@@ -279,7 +281,7 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
         pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
     out = []
     for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
-        for mask in split_touching(region, K, plane):
+        for mask in split_touching(region, K, plane, depth=depth_m, min_area=min_area):
             if mask.sum() >= min_area:
                 out.append(Candidate(mask, float(glass[mask].mean())))
     return sorted(out, key=lambda c: -int(c.mask.sum()))
@@ -341,55 +343,119 @@ def _connected(group: list[int], length: np.ndarray) -> bool:
     return len(seen) == len(group)
 
 
-def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *, max_pieces: int = 4,
-                   gain: float = SPLIT_GAIN, min_share: float = 0.2,
-                   whole_iou: float | None = None, depth: int = 2) -> list[np.ndarray]:
+def _attachments(region: np.ndarray, min_area: int) -> tuple[np.ndarray, list[np.ndarray]]:
+    """A region's body and the thin parts hanging off it: the body is what an opening by half
+    its inscribed radius keeps, the parts are the components of what it removes that are more
+    than slivers and at least ``min_area`` pixels (a vial beside or behind a glass; also a
+    bottle's neck or a goblet's stem and foot, which :func:`split_touching` keeps by the
+    readings on them). The watershed of :func:`_pieces` seeds only at wide places and gives
+    such parts no piece of their own. What joins a part to the body (a bridge of fill between
+    two objects) belongs to neither."""
+    dt = cv2.distanceTransform(region.astype(np.uint8), cv2.DIST_L2, 5)
+    radius = int(0.5 * float(dt.max()))
+    if radius < 4:
+        return region, []
+    body = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_OPEN, _disk(radius))
+    body = region & (cv2.dilate(body, _disk(1)) > 0)
+    rest = cv2.morphologyEx((region & ~body).astype(np.uint8), cv2.MORPH_OPEN, _disk(2))
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(rest, 8)
+    return body, [labels == k for k in range(1, count) if stats[k, 4] >= min_area]
+
+
+def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
+                   depth: np.ndarray | None = None, max_pieces: int = 4,
+                   gain: float = SPLIT_GAIN, min_share: float = 0.2, min_area: int = 150,
+                   whole=None, rounds: int = 2) -> list[np.ndarray]:
     """Split a region made of touching objects where solids of revolution on the table explain
     the parts clearly better than one explains the whole.
 
-    The region is cut into watershed pieces of the distance to its edge (at most ``max_pieces``),
-    and every grouping of them into two connected parts, each at least ``min_share`` of the
-    region (a sliver of background fits anything), is tried: both parts' silhouette IoUs
-    must exceed the whole's, and their area-weighted mean must gain ``gain`` on it (two glasses
-    side by side split; a goblet's bowl and foot, a bottle's body and neck do not). The best
-    such split wins and each part is split again, ``depth`` levels deep.
+    Two kinds of cut are tried. The region is cut into watershed pieces of the distance to its
+    edge (at most ``max_pieces``), and every grouping of them into two connected parts, each at
+    least ``min_share`` of the region (a sliver of background fits anything), is a candidate;
+    so is every thin part hanging off the body (:func:`_attachments`, at least ``min_area``
+    pixels). A cut holds by the outline when both parts' silhouette IoUs exceed the whole's
+    and their area-weighted mean gains ``gain`` on it (two glasses side by side split; a
+    goblet's bowl and foot, a bottle's body and neck do not). With raw ``depth`` (metres), a cut
+    also holds by the readings when more of the region's off-table readings lie on the parts'
+    fitted surfaces than on the whole's, by :data:`SPLIT_READINGS` of the whole's count and at
+    least ``DEPTH_MIN_POINTS``, with both parts fitting to :data:`SPLIT_PART_IOU` and holding
+    that many readings each (a vial behind a glass draws a fine bottle: the bottle's neck
+    misses the vial's readings; a part without readings of its own is no object). Only the
+    readings hold a thin attachment's cut (it may be as small as a sliver). A cut
+    the readings clearly refute (fewer on the parts by that much) does not hold by the outline.
+    The best cut that holds wins (readings first) and each part is split again, ``rounds``
+    levels deep (``whole``: the region's fit when already known).
     """
-    from sr3d_cli.reconstruct.revolution_fit import fit_revolution
+    from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS,
+                                                     fit_revolution, off_table_readings,
+                                                     raw_support)
 
-    labels, n, length = _pieces(region, max_pieces)
-    if n < 2 or depth < 1:
+    if rounds < 1:
         return [region]
-
-    def iou(mask: np.ndarray) -> float:
-        try:
-            return fit_revolution(mask, K, plane).iou
-        except ValueError:  # a part that cannot stand or lie on the table
-            return -1.0
-
-    whole = whole_iou  # fitted when a split worth trying turns up (most regions have none)
+    labels, n, length = _pieces(region, max_pieces)
     area = float(region.sum())
-    best = None
+    cuts = []
     for bits in range(1, 2 ** (n - 1)):  # piece n stays in the second part
         first = [k for k in range(1, n + 1) if bits >> (k - 1) & 1]
         second = [k for k in range(1, n + 1) if k not in first]
-        if not (_connected(first, length) and _connected(second, length)):
-            continue
-        a = np.isin(labels, first)
-        b = region & ~a
-        if min(a.sum(), b.sum()) < min_share * area:
-            continue
+        if _connected(first, length) and _connected(second, length):
+            a = np.isin(labels, first)
+            if min(a.sum(), area - a.sum()) >= min_share * area:
+                cuts.append((a, region & ~a))
+    grouped = len(cuts)  # cuts past this one are thin attachments: only readings hold them
+    body, thin = _attachments(region, min_area)
+    if thin and cv2.connectedComponents(body.astype(np.uint8), connectivity=8)[0] == 2:
+        cuts += [(a, body) for a in thin]
+    if not cuts:
+        return [region]
+    readings = None
+    if depth is not None:
+        readings = off_table_readings(region, depth, K, plane)
+        if len(readings[0]) < DEPTH_MIN_POINTS:
+            readings = None
+
+    def fit(mask: np.ndarray):
+        try:
+            return fit_revolution(mask, K, plane, depth=depth)
+        except ValueError:  # a part that cannot stand or lie on the table
+            return None
+
+    def on_surface(found, mask: np.ndarray) -> int:
+        """How many of the region's readings in ``mask`` lie on the fit's surface."""
+        xs, ys, raw = (r[mask[readings[1], readings[0]]] for r in readings)
+        return 0 if found is None else raw_support(found, xs, ys, raw, K, mask.shape, DEPTH_BAND)
+
+    best, whole_on = None, None  # best: (by readings, score), parts with their fits
+    for i, (a, b) in enumerate(cuts):
+        if whole is None:  # fitted once a cut turns up (most regions have none)
+            whole = fit(region)
         if whole is None:
-            whole = iou(region)
-        ia, ib = iou(a), iou(b)
-        mean = (ia * a.sum() + ib * b.sum()) / area
-        if min(ia, ib) > whole and mean >= whole + gain and (best is None or mean > best[0]):
-            best = (mean, a, ia, b, ib)
+            return [region]
+        fa, fb = fit(a), fit(b)
+        ia, ib = (f.iou if f is not None else -1.0 for f in (fa, fb))
+        mean = (ia * a.sum() + ib * b.sum()) / (a.sum() + b.sum())
+        by_outline = i < grouped and min(ia, ib) > whole.iou and mean >= whole.iou + gain
+        by_readings, score = False, mean
+        if readings is not None:
+            if whole_on is None:
+                whole_on = on_surface(whole, region)
+            sa, sb = on_surface(fa, a), on_surface(fb, b)
+            margin = max(DEPTH_MIN_POINTS, SPLIT_READINGS * whole_on)
+            by_readings = (min(ia, ib) >= SPLIT_PART_IOU and min(sa, sb) >= DEPTH_MIN_POINTS
+                           and sa + sb >= whole_on + margin)
+            by_outline &= sa + sb > whole_on - margin
+            score = sa + sb if by_readings else mean
+        if not (by_outline or by_readings):
+            continue
+        key = (by_readings, score)
+        if best is None or key > best[0]:
+            best = (key, ((a, fa), (b, fb)))
     if best is None:
         return [region]
-    _, a, ia, b, ib = best
-    return [part for mask, fit in ((a, ia), (b, ib))
-            for part in split_touching(mask, K, plane, max_pieces=max_pieces, gain=gain,
-                                       min_share=min_share, whole_iou=fit, depth=depth - 1)]
+    return [part for mask, own in best[1]
+            for part in split_touching(mask, K, plane, depth=depth, max_pieces=max_pieces,
+                                       gain=gain, min_share=min_share, min_area=min_area,
+                                       whole=own, rounds=rounds - 1)]
 
 
 def merge_pieces(pieces: list[np.ndarray], shape: tuple[int, int], *, radius: int
