@@ -329,13 +329,14 @@ def mesh_bench(synth: Path) -> dict:
         if not root.is_dir():
             result[label] = {"skipped": f"{root} not present"}
             continue
-        ious = []
+        ious, found = [], []  # best IoU of each true instance; of each predicted one
         for source in discover_scenes(root, IOConfig(), None):
             for fid in source.frame_ids():
                 frame = source.load_frame(fid)
                 gt = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
-                ious += instance_ious(segmenter(fid, frame.rgb, frame.depth_m,
-                                                frame.camera.K).ids, gt).values()
+                pred = segmenter(fid, frame.rgb, frame.depth_m, frame.camera.K).ids
+                ious += instance_ious(pred, gt).values()
+                found += instance_ious(gt, pred).values()
                 objects = source.load_gt_objects(fid) if label == "synthetic" else None
                 if not objects:
                     continue
@@ -353,7 +354,9 @@ def mesh_bench(synth: Path) -> dict:
                     shape[obj["pose"]].append(chamfer_distance(revolve(fit.profile),
                                                                revolve(truth)))
         result[label] = {"instances": len(ious), "mean_iou": float(np.mean(ious)),
-                         "detection": float(np.mean(np.array(ious) > 0.5))}
+                         "detection": float(np.mean(np.array(ious) > 0.5)),
+                         "predicted": len(found),
+                         "precision": float(np.mean(np.array(found) > 0.5)) if found else 0.0}
         print("mesh", label, result[label], file=sys.stderr)
     result["shape"] = {k: {"objects": len(v), "median_chamfer_per_height": float(np.median(v))}
                        for k, v in shape.items() if v}
@@ -502,17 +505,21 @@ def write_report(results: dict, methods) -> None:
     mesh = results.get("mesh", {})
     if mesh:
         lines += ["## segmentation and reconstruction (default backends)", "",
-                  "Segmentation: best IoU of each ground-truth instance; detected = IoU > 0.5. "
+                  "Segmentation: best IoU of each ground-truth instance; detected = IoU > 0.5; "
+                  "precision = share of predicted instances with IoU > 0.5 against some "
+                  "ground-truth instance (the rest are false detections or fragments). "
                   "Reconstruction: ground-truth masks and support plane, symmetric Chamfer "
                   "distance / height against the true mesh (both at unit height), median.", "",
-                  "| set | instances | mean IoU | detection % |", "|---|---|---|---|"]
+                  "| set | instances | mean IoU | detection % | predicted | precision % |",
+                  "|---|---|---|---|---|---|"]
         for label in ("synthetic", "real"):
             m = mesh.get(label, {})
             if "skipped" in m or not m:
-                lines.append(f"| {label} | skipped: {m.get('skipped', 'not run')} | | |")
+                lines.append(f"| {label} | skipped: {m.get('skipped', 'not run')} | | | | |")
                 continue
             lines.append(f"| {label} | {m['instances']} | {m['mean_iou']:.3f} | "
-                         f"{100 * m['detection']:.1f} |")
+                         f"{100 * m['detection']:.1f} | {m.get('predicted', '-')} | "
+                         + (f"{100 * m['precision']:.1f} |" if "precision" in m else "- |"))
         lines += ["", "| resting | objects | median Chamfer / height % |", "|---|---|---|"]
         for k, v in mesh.get("shape", {}).items():
             lines.append(f"| {k} | {v['objects']} | {100 * v['median_chamfer_per_height']:.2f} |")

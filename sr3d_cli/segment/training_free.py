@@ -402,17 +402,18 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             a = np.isin(labels, first)
             if min(a.sum(), area - a.sum()) >= min_share * area:
                 cuts.append((a, region & ~a))
-    grouped = len(cuts)  # cuts past this one are thin attachments: only readings hold them
-    body, thin = _attachments(region, min_area)
-    if thin and cv2.connectedComponents(body.astype(np.uint8), connectivity=8)[0] == 2:
-        cuts += [(a, body) for a in thin]
-    if not cuts:
-        return [region]
     readings = None
     if depth is not None:
         readings = off_table_readings(region, depth, K, plane)
         if len(readings[0]) < DEPTH_MIN_POINTS:
             readings = None
+    grouped = len(cuts)  # cuts past this one are thin attachments: only readings hold them
+    if readings is not None:
+        body, thin = _attachments(region, min_area)
+        if thin and cv2.connectedComponents(body.astype(np.uint8), connectivity=8)[0] == 2:
+            cuts += [(a, body) for a in thin]
+    if not cuts:
+        return [region]
 
     def fit(mask: np.ndarray):
         try:
@@ -431,7 +432,10 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             whole = fit(region)
         if whole is None:
             return [region]
-        fa, fb = fit(a), fit(b)
+        fa = fit(a)
+        if i >= grouped and (fa is None or fa.iou < SPLIT_PART_IOU):
+            continue  # a thin part that cannot hold by the readings
+        fb = fit(b)
         ia, ib = (f.iou if f is not None else -1.0 for f in (fa, fb))
         mean = (ia * a.sum() + ib * b.sum()) / (a.sum() + b.sum())
         by_outline = i < grouped and min(ia, ib) > whole.iou and mean >= whole.iou + gain
