@@ -171,6 +171,24 @@ def test_raw_depth_tells_a_standing_bottle_from_a_lying_one_seen_from_above(x):
     assert fit_revolution(mask, K, plane, depth=see_through).resting == "lying"
 
 
+def test_readings_high_above_a_lying_fit_make_a_goblet_stand():
+    """Seen steeply from above, a tall goblet draws the outline of a short lying one. With 1 cm
+    of noise on the glass, few readings lie within the surface band of either fit and the vote
+    cannot decide; but the readings on the cup stand far higher above the table than a lying
+    goblet reaches, and a ray meets the surface before anything lower behind it."""
+    goblet = np.array([[0, 0], [0.035, 0], [0.033, 0.004], [0.005, 0.01], [0.005, 0.07],
+                       [0.03, 0.09], [0.04, 0.15], [0.036, 0.2], [0, 0.2]])
+    plane, mask, depth, see_through, h = _frame_from_above(goblet, 74.0, 0.0, 0.1)
+    front = (depth > 0) & (depth != see_through)
+    noisy = np.where(front, depth + np.random.default_rng(5).normal(0, 0.01, depth.shape),
+                     see_through).astype(np.float32)
+    assert fit_revolution(mask, K, plane).resting == "lying"
+    fit = fit_revolution(mask, K, plane, depth=noisy)
+    assert fit.resting == "standing"
+    assert fit.height == pytest.approx(h, rel=0.15)
+    assert fit_revolution(mask, K, plane, depth=see_through).resting == "lying"
+
+
 def test_seen_down_its_axis_a_bottle_takes_its_profile_from_the_readings():
     """Straight from above the outline is a disc: a bottle, a jar and a glass draw the same one.
     The readings on the neck's top and the shoulder give the height and the profile; a glass

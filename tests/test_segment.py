@@ -209,6 +209,31 @@ def test_a_vial_against_a_glass_is_split_by_the_readings_but_a_goblet_or_bottle_
         assert len(split_touching(ids > 0, K, plane, depth=sparse(depth))) == 1
 
 
+@pytest.mark.parametrize("back", ["beaker", "flask"])
+def test_one_object_behind_another_is_split_where_their_readings_stand(back):
+    """A beaker or a tall flask straight behind a flask, their outlines filled to one convex
+    region (no neck for the watershed, as when the fill between them closes): dropped onto the
+    table, the readings on each stand around its own axis, and the cut between the two groups
+    holds by the readings. The outline alone keeps them as one."""
+    from sr3d_cli.segment.training_free import split_touching
+
+    flask = [[0, 0], [0.045, 0], [0.047, 0.01], [0.04, 0.06], [0.012, 0.1], [0.012, 0.13],
+             [0, 0.13]]
+    behind = {"beaker": ([[0, 0], [0.04, 0], [0.04, 0.09], [0, 0.09]], 0.09),
+              "flask": ([[0, 0], [0.04, 0], [0.042, 0.01], [0.036, 0.08], [0.012, 0.14],
+                         [0.012, 0.17], [0, 0.17]], 0.17)}[back]
+    ids, K, plane, depth = _silhouettes([(flask, 0.13, 0.0, -0.03), (*behind, 0.0, 0.1)])
+    hull = np.zeros(ids.shape, np.uint8)
+    cv2.fillConvexPoly(hull, cv2.convexHull(cv2.findNonZero((ids > 0).astype(np.uint8))), 1)
+    region = hull > 0
+    sparse = np.where(np.random.default_rng(0).random(depth.shape) < 0.3, depth, 0.0)
+    assert len(split_touching(region, K, plane)) == 1
+    parts = split_touching(region, K, plane, depth=sparse)
+    assert len(parts) == 2
+    ious = instance_ious(np.argmax(np.stack([np.zeros_like(region)] + parts), 0), ids)
+    assert min(ious.values()) > 0.85
+
+
 def test_a_goblet_whose_foot_meets_a_flask_is_split_between_them():
     """The flask in front hides part of the goblet's foot: the two touch along a wide boundary,
     not at a neck, and the goblet itself has a neck (its stem). The split that fits best keeps

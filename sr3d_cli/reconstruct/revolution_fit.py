@@ -360,6 +360,14 @@ def raw_support(fit: RevolutionFit, xs: np.ndarray, ys: np.ndarray, raw: np.ndar
     return int((np.abs(z - raw) < band).sum())
 
 
+def top_height(fit: RevolutionFit, plane: Plane) -> float:
+    """Height (metres) of the fitted solid's highest point above ``plane``."""
+    z = fit.profile[:, 1] * fit.height
+    centres = plane.height(fit.base + z[:, None] * fit.axis)
+    across = np.sqrt(max(0.0, 1.0 - float(fit.axis @ plane.normal) ** 2))
+    return float((centres + fit.profile[:, 0] * fit.height * across).max())
+
+
 def axial_view_angle(mask: np.ndarray, K: np.ndarray, plane: Plane) -> float:
     """Degrees between the table normal and the camera ray to the mask's centroid: near 0,
     the camera looks down a standing object's axis and its outline says almost nothing about
@@ -437,7 +445,7 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
                    depth_band: float = DEPTH_BAND, depth_min_points: int = DEPTH_MIN_POINTS,
                    depth_vote: float = 2.0, vote_iou_gap: float = 0.06,
                    axial_view: float = 25.0, axial_iou_gap: float = 0.03,
-                   tilt_tolerance: float = 0.01) -> RevolutionFit:
+                   refute_share: float = 0.25, tilt_tolerance: float = 0.01) -> RevolutionFit:
     """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
 
     Standing and lying are both fitted; the better silhouette wins, lying only by
@@ -450,6 +458,11 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     readings (:func:`_fit_axial`); that fit is kept if more readings lie on its surface and its
     silhouette IoU is within ``axial_iou_gap`` of the outline fit's (a flask's thin neck leaves
     few readings: the readings' height falls short where the outline has it right).
+    Readings more than ``depth_band`` above a fit's highest point refute it: with the camera
+    above the table, a ray meets the object's surface before anything lower behind it, so they
+    can only be noise in front of it. A lying fit that ``refute_share`` of the readings (at least
+    ``depth_min_points``) refute loses to a standing one they do not, whatever the outline says
+    (a tall goblet seen steeply from above draws the outline of a short lying one).
     Standing and lying are weighed with the lying axis parallel to the table; a lying winner is
     then fitted again resting on its hull, tilted (:func:`_resting_tilt`), and that fit is kept
     if its IoU is within ``tilt_tolerance`` of the flat one's.
@@ -490,7 +503,12 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         support = [on_surface(f) if count is None else count for _, f, count in fits]
         lo, hi = sorted(support)
         close = abs(fits[0][1].iou - fits[1][1].iou) <= vote_iou_gap
-        if close and hi >= depth_min_points and hi >= depth_vote * lo:
+        heights = plane.height(readings)
+        above = [int((heights > top_height(f, plane) + depth_band).sum()) for _, f, _ in fits]
+        refuted = [a >= max(depth_min_points, refute_share * len(heights)) for a in above]
+        if fits[1][1].resting == "lying" and refuted[1] and not refuted[0]:
+            best = fits[0][1]  # readings high above a lying fit: it stands
+        elif close and hi >= depth_min_points and hi >= depth_vote * lo:
             best = fits[int(np.argmax(support))][1]
     if best.resting == "lying":
         # decided flat (a tilt would let the lying fit take short standing vessels); from its

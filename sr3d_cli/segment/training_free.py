@@ -17,9 +17,11 @@ The steps:
    artefacts such as the dropouts along opaque edges, and an area floor;
 5. each candidate refined by GrabCut in a window around it (colour edges), seeded with the
    evidence as probable foreground and the opaque pixels as background;
-6. a region of touching objects split at its narrow necks (distance-transform watershed), kept
-   split only where solids of revolution on the table explain the parts clearly better than the
-   whole (the revolution fit of :mod:`sr3d_cli.reconstruct.revolution_fit`).
+6. a region of touching objects split at its narrow necks (distance-transform watershed), at
+   thin parts hanging off it, or between groups of its readings that stand apart on the table
+   (one object behind another), kept split only where solids of revolution on the table
+   explain the parts clearly better than the whole (the revolution fit of
+   :mod:`sr3d_cli.reconstruct.revolution_fit`).
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from sr3d_cli.geometry.camera import depth_to_points
+from sr3d_cli.geometry.camera import depth_to_points, unproject
 from sr3d_cli.geometry.plane import Plane
 
 
@@ -38,6 +40,7 @@ ON_TABLE_SHARE = 0.3  # least share of a candidate over the table's footprint
 SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (split_touching)
 SPLIT_READINGS = 0.25  # share of the whole's readings on its surface a split must add (ditto)
 SPLIT_PART_IOU = 0.85  # silhouette IoU both parts of a split made by the readings must reach
+FOOTPRINT_APART = 0.03  # metres between two groups of readings on the table (_footprint_cut)
 BORDER_REACH = 0.1  # share of the image width along its sides where holes may be the
 # camera's own (a stereo camera's invalid left band is baseline x fx / depth wide: ~100 px at
 # 0.5 m for a D415 at 1280 px); see evidence_maps
@@ -362,6 +365,44 @@ def _attachments(region: np.ndarray, min_area: int) -> tuple[np.ndarray, list[np
     return body, [labels == k for k in range(1, count) if stats[k, 4] >= min_area]
 
 
+def _footprint_cut(region: np.ndarray, xs: np.ndarray, ys: np.ndarray, raw: np.ndarray,
+                   K: np.ndarray, plane: Plane, min_apart: float, min_area: int
+                   ) -> tuple[np.ndarray, np.ndarray] | None:
+    """A cut of a region along where its off-table readings (pixels ``xs``, ``ys``, depth
+    ``raw`` metres) stand on the table. Dropped straight onto the table, the readings on one
+    solid gather around its axis; two objects that overlap in the image, one in front of the
+    other, stand apart there though their outlines run into each other with no neck between
+    them. The readings are grouped in two by 2-means from the two farthest apart; a cut is
+    made when the groups' centres are ``min_apart`` metres apart, each pixel going with its
+    nearest reading's group (each part at least ``min_area`` pixels). None otherwise."""
+    if len(xs) < 2:
+        return None
+    pts = unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K)
+    foot = pts - plane.height(pts)[:, None] * plane.normal
+    c = [foot[np.argmax(np.linalg.norm(foot - foot.mean(0), axis=1))]]
+    c.append(foot[np.argmax(np.linalg.norm(foot - c[0], axis=1))])
+    for _ in range(10):
+        side = np.linalg.norm(foot - c[0], axis=1) > np.linalg.norm(foot - c[1], axis=1)
+        if side.all() or not side.any():
+            return None
+        c = [foot[~side].mean(0), foot[side].mean(0)]
+    if np.linalg.norm(c[0] - c[1]) < min_apart:
+        return None
+    seeds = np.zeros(region.shape, np.uint8)
+    seeds[ys, xs] = np.where(side, 2, 1)
+    iy, ix = ndimage.distance_transform_edt(seeds == 0, return_distances=False,
+                                            return_indices=True)
+    first = region & (seeds[iy, ix] == 1)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(first.astype(np.uint8), 8)
+    if count < 2:
+        return None
+    a = labels == 1 + int(np.argmax(stats[1:, 4]))
+    b = region & ~a
+    if min(a.sum(), b.sum()) < min_area:
+        return None
+    return a, b
+
+
 def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
                    depth: np.ndarray | None = None, max_pieces: int = 4,
                    gain: float = SPLIT_GAIN, min_share: float = 0.2, min_area: int = 150,
@@ -369,22 +410,25 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     """Split a region made of touching objects where solids of revolution on the table explain
     the parts clearly better than one explains the whole.
 
-    Two kinds of cut are tried. The region is cut into watershed pieces of the distance to its
+    Three kinds of cut are tried. The region is cut into watershed pieces of the distance to its
     edge (at most ``max_pieces``), and every grouping of them into two connected parts, each at
-    least ``min_share`` of the region (a sliver of background fits anything), is a candidate;
-    so is every thin part hanging off the body (:func:`_attachments`, at least ``min_area``
-    pixels). A cut holds by the outline when both parts' silhouette IoUs exceed the whole's
-    and their area-weighted mean gains ``gain`` on it (two glasses side by side split; a
-    goblet's bowl and foot, a bottle's body and neck do not). With raw ``depth`` (metres), a cut
-    also holds by the readings when more of the region's off-table readings lie on the parts'
-    fitted surfaces than on the whole's, by :data:`SPLIT_READINGS` of the whole's count and at
-    least ``DEPTH_MIN_POINTS``, with both parts fitting to :data:`SPLIT_PART_IOU` and holding
-    that many readings each (a vial behind a glass draws a fine bottle: the bottle's neck
-    misses the vial's readings; a part without readings of its own is no object). Only the
-    readings hold a thin attachment's cut (it may be as small as a sliver). A cut
-    the readings clearly refute (fewer on the parts by that much) does not hold by the outline.
-    The best cut that holds wins (readings first) and each part is split again, ``rounds``
-    levels deep (``whole``: the region's fit when already known).
+    least ``min_share`` of the region (a sliver of background fits anything), is a candidate; so
+    are every thin part hanging off the body (:func:`_attachments`, at least ``min_area``
+    pixels) and, with raw ``depth``, the cut between two groups of readings that stand apart on
+    the table (:func:`_footprint_cut`: one object behind another). A cut holds by the outline
+    when both parts' silhouette IoUs exceed the whole's and their area-weighted mean gains
+    ``gain`` on it (two glasses side by side split; a goblet's bowl and foot, a bottle's body
+    and neck do not). With raw ``depth`` (metres), a cut also holds by the readings when more of
+    the region's off-table readings lie on the parts' fitted surfaces than on the whole's, by
+    :data:`SPLIT_READINGS` of the whole's count and at least ``DEPTH_MIN_POINTS``, with both
+    parts fitting to :data:`SPLIT_PART_IOU` and holding that many readings each (a vial behind a
+    glass draws a fine bottle: the bottle's neck misses the vial's readings; a part without
+    readings of its own is no object). Only the readings hold a thin attachment's or a footprint
+    cut (the first may be as small as a sliver, the second follows the readings, not the
+    outline). A cut the readings clearly refute (fewer on the parts by that much) does not hold
+    by the outline. The best cut that holds wins (readings first; among those, a footprint cut
+    only where no other holds, its edge being only as fine as the readings) and each part is
+    split again, ``rounds`` levels deep (``whole``: the region's fit when already known).
     """
     from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS,
                                                      fit_revolution, off_table_readings,
@@ -407,8 +451,14 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         readings = off_table_readings(region, depth, K, plane)
         if len(readings[0]) < DEPTH_MIN_POINTS:
             readings = None
-    grouped = len(cuts)  # cuts past this one are thin attachments: only readings hold them
+    grouped = len(cuts)  # cuts past this one the readings made: only readings hold them
+    footprint = None  # its index; it follows the readings, not the outline: ranked last
     if readings is not None:
+        every = off_table_readings(region, depth, K, plane, samples=int(area))
+        cut = _footprint_cut(region, *every, K, plane, FOOTPRINT_APART, min_area)
+        if cut is not None:
+            footprint = len(cuts)
+            cuts.append(cut)
         body, thin = _attachments(region, min_area)
         if thin and cv2.connectedComponents(body.astype(np.uint8), connectivity=8)[0] == 2:
             cuts += [(a, body) for a in thin]
@@ -451,7 +501,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             score = sa + sb if by_readings else mean
         if not (by_outline or by_readings):
             continue
-        key = (by_readings, score)
+        key = (by_readings, i != footprint, score)
         if best is None or key > best[0]:
             best = (key, ((a, fa), (b, fb)))
     if best is None:
