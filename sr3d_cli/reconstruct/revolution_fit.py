@@ -30,6 +30,7 @@ from sr3d_cli.geometry.transforms import make_T, rotation_about
 
 DEPTH_BAND = 0.01  # metres: a raw reading this close to a model's front surface lies on it
 DEPTH_MIN_POINTS = 30  # fewest readings on a surface that count as evidence
+DEPTH_SAMPLES = 400  # readings of a mask weighed against fitted surfaces (evenly spread)
 
 
 @dataclass
@@ -335,7 +336,7 @@ def _result(model: _Model, resting: str, iou: float) -> RevolutionFit:
 
 
 def off_table_readings(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, plane: Plane,
-                       band: float = DEPTH_BAND, samples: int = 400
+                       band: float = DEPTH_BAND, samples: int = DEPTH_SAMPLES
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixels (xs, ys) and raw depth of the mask's readings more than ``band`` above the table
     (those on it are see-through readings), at most ``samples`` of them, evenly spread."""
@@ -343,9 +344,14 @@ def off_table_readings(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, plane
     z = depth[ys, xs].astype(np.float64)
     pts = unproject(np.column_stack([xs, ys]).astype(np.float64), z, K)
     keep = plane.height(pts) > band
-    xs, ys, z = xs[keep], ys[keep], z[keep]
-    pick = np.linspace(0, len(xs) - 1, min(len(xs), samples)).astype(np.int64)
-    return xs[pick], ys[pick], z[pick]
+    return evenly((xs[keep], ys[keep], z[keep]), samples)
+
+
+def evenly(readings: tuple[np.ndarray, ...], samples: int) -> tuple[np.ndarray, ...]:
+    """At most ``samples`` of ``readings`` (parallel arrays), evenly spread."""
+    n = len(readings[0])
+    pick = np.linspace(0, n - 1, min(n, samples)).astype(np.int64)
+    return tuple(r[pick] for r in readings)
 
 
 def raw_support(fit: RevolutionFit, xs: np.ndarray, ys: np.ndarray, raw: np.ndarray,
@@ -506,7 +512,7 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         heights = plane.height(readings)
         above = [int((heights > top_height(f, plane) + depth_band).sum()) for _, f, _ in fits]
         refuted = [a >= max(depth_min_points, refute_share * len(heights)) for a in above]
-        if fits[1][1].resting == "lying" and refuted[1] and not refuted[0]:
+        if refuted[1] and not refuted[0]:  # fits: standing, then lying
             best = fits[0][1]  # readings high above a lying fit: it stands
         elif close and hi >= depth_min_points and hi >= depth_vote * lo:
             best = fits[int(np.argmax(support))][1]

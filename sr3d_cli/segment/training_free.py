@@ -431,8 +431,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     split again, ``rounds`` levels deep (``whole``: the region's fit when already known).
     """
     from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS,
-                                                     fit_revolution, off_table_readings,
-                                                     raw_support)
+                                                     DEPTH_SAMPLES, evenly, fit_revolution,
+                                                     off_table_readings, raw_support)
 
     if rounds < 1:
         return [region]
@@ -448,13 +448,13 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
                 cuts.append((a, region & ~a))
     readings = None
     if depth is not None:
-        readings = off_table_readings(region, depth, K, plane)
+        every = off_table_readings(region, depth, K, plane, samples=int(area))
+        readings = evenly(every, DEPTH_SAMPLES)  # as fit_revolution samples them
         if len(readings[0]) < DEPTH_MIN_POINTS:
             readings = None
     grouped = len(cuts)  # cuts past this one the readings made: only readings hold them
     footprint = None  # its index; it follows the readings, not the outline: ranked last
     if readings is not None:
-        every = off_table_readings(region, depth, K, plane, samples=int(area))
         cut = _footprint_cut(region, *every, K, plane, FOOTPRINT_APART, min_area)
         if cut is not None:
             footprint = len(cuts)
