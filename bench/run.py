@@ -319,7 +319,7 @@ def mesh_bench(synth: Path) -> dict:
     from sr3d_cli.config import PlaneConfig, ReconstructConfig, SegmentConfig
     from sr3d_cli.evaluate import chamfer_distance, instance_ious
     from sr3d_cli.geometry.revolution import profile_from_mesh, revolve
-    from sr3d_cli.reconstruct import ObjectError, check_mask, configured_fit
+    from sr3d_cli.reconstruct import ObjectError, check_border, check_mask, configured_fit
     from sr3d_cli.segment import Segmenter, support_plane
 
     segmenter = Segmenter(SegmentConfig(), PlaneConfig())
@@ -346,6 +346,7 @@ def mesh_bench(synth: Path) -> dict:
                     try:
                         rc = ReconstructConfig()
                         check_mask(gt == obj["id"], rc)
+                        check_border(gt == obj["id"], rc, frame.camera.K)  # any cut
                         fit = configured_fit(gt == obj["id"], frame.camera.K, plane, rc,
                                              frame.depth_m)
                     except ObjectError:

@@ -199,7 +199,7 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
     """Plan grasps for one frame; writes ``grasps/<id>.json`` and ``.npy`` (an empty but valid
     file, with the reason, when nothing can be planned). Returns (grasps, messages)."""
     from sr3d_cli.grasp import GraspSet
-    from sr3d_cli.grasp.planner import Cloud, depth_cloud, mesh_cloud
+    from sr3d_cli.grasp.planner import Cloud, depth_cloud, in_view, mesh_cloud
 
     source, fid, K = frame.scene, frame.frame_id, frame.camera.K
     cfg = planner.cfg
@@ -226,9 +226,9 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
             for obj in poses.get("objects", []):
                 k = int(obj["id"])
                 mesh = load_mesh(find_mesh(source, fid, k))
-                targets[k] = mesh_cloud(mesh, np.asarray(obj["T_cam_obj"]), float(obj["scale"]),
-                                        k, cfg.mesh_points, seed=k)
-                placed.append(targets[k])
+                placed.append(mesh_cloud(mesh, np.asarray(obj["T_cam_obj"]),
+                                         float(obj["scale"]), k, cfg.mesh_points, seed=k))
+                targets[k] = in_view(placed[-1], K, depth.shape)
             scene = Cloud.concat([scene] + placed)
         if only is not None:
             targets = {only: targets[only]}

@@ -14,11 +14,12 @@ from sr3d_cli.cli import cli
 from sr3d_cli.config import IOConfig, ReconstructConfig
 from sr3d_cli.errors import InputError
 from sr3d_cli.evaluate import chamfer_distance
+from sr3d_cli.geometry.camera import project
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, profile_from_mesh, revolve, silhouette
 from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.io.formats import discover_scenes
-from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_mask
+from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_border, check_mask
 from sr3d_cli.reconstruct.revolution_fit import _resting_tilt, axial_view_angle, fit_revolution
 from tests import onnx_builders
 
@@ -300,9 +301,46 @@ def test_bad_masks_are_refused_with_the_reason():
     with pytest.raises(ObjectError, match="16 px"):
         check_mask(mask, cfg)
     mask[0:30, 20:40] = True
+    check_mask(mask, cfg)
     with pytest.raises(ObjectError, match="border"):
-        check_mask(mask, cfg)
-    check_mask(mask, ReconstructConfig(allow_border=True))
+        check_border(mask, cfg, K)
+    assert check_border(mask, ReconstructConfig(allow_border=True), K) is None
+
+
+def _cut_bottle(u: float, v: float):
+    """A 0.30 m bottle (radius 0.03 m) standing where the ray through pixel (u, v) meets a table
+    seen from 30 degrees; its mask as the 640 x 480 image cuts it."""
+    plane = _table(30.0, 0.6)
+    base = plane.intersect(np.linalg.solve(K, [u, v, 1.0]))
+    r, h = 0.03, 0.30
+    prof = np.array([[0, 0], [r, 0], [r, h], [0, h]])
+    return plane, base, r, _render(prof, base, plane.normal)
+
+
+def test_a_bottle_whose_top_the_image_cuts_is_fitted_from_its_base_and_width():
+    plane, base, r, mask = _cut_bottle(330.0, 200.0)
+    assert mask[0].any() and not (mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
+    result = Reconstructor(ReconstructConfig())(np.zeros((480, 640, 3), np.uint8), mask, K, plane)
+    meta = result.meta
+    assert meta["cut_by_border"] == "top" and meta["resting"] == "standing"
+    T = np.array(meta["pose_hint"]["T_cam_obj"])
+    assert np.linalg.norm(T[:3, 3] - base) < 0.004
+    assert np.degrees(np.arccos(T[:3, 2] @ plane.normal)) < 2
+    height = meta["pose_hint"]["scale"]
+    assert meta["silhouette_iou"] > 0.95
+    # the model runs at least to the border, with the bottle's width there
+    radius = result.mesh.vertices[:, 0].max() * height
+    assert radius == pytest.approx(r, rel=0.05)
+    top = project((base + height * plane.normal)[None], K)[0]
+    assert top[1] < 5  # its top cap reaches past row 0
+
+
+@pytest.mark.parametrize("u, v", [(15.0, 380.0), (330.0, 470.0)])
+def test_an_object_the_border_cuts_at_its_side_or_base_is_refused(u, v):
+    plane, _, _, mask = _cut_bottle(u, v)
+    assert mask[0].any() or mask[-1].any() or mask[:, 0].any()
+    with pytest.raises(ObjectError, match="border lower than the upper half"):
+        Reconstructor(ReconstructConfig())(np.zeros((480, 640, 3), np.uint8), mask, K, plane)
 
 
 def _object_mask():

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sr3d_cli.geometry.camera import depth_normals, depth_to_points
+from sr3d_cli.geometry.camera import depth_normals, depth_to_points, project
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points
 from sr3d_cli.grasp import GraspSet
@@ -66,6 +66,15 @@ def mesh_cloud(mesh, T_cam_obj: np.ndarray, scale: float, label: int, count: int
     pts, faces = trimesh.sample.sample_surface(placed, count, seed=seed)
     nrm = placed.face_normals[faces]
     return Cloud(np.asarray(pts), np.asarray(nrm), np.full(len(pts), label, dtype=np.int64))
+
+
+def in_view(cloud: Cloud, K: np.ndarray, shape: tuple[int, int]) -> Cloud:
+    """The points of ``cloud`` the camera sees the place of (in front of it, inside the image
+    ``shape``): a placed mesh runs past the border where the image cuts its object, and a
+    grasp there would rest on a made-up surface."""
+    front = cloud.points[:, 2] > 0
+    u, v = project(np.where(front[:, None], cloud.points, [0.0, 0.0, 1.0]), K).T
+    return cloud.select(front & (u >= 0) & (u <= shape[1] - 1) & (v >= 0) & (v <= shape[0] - 1))
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

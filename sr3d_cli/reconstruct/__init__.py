@@ -14,10 +14,14 @@ import numpy as np
 import trimesh
 
 from sr3d_cli.config import ReconstructConfig
+from sr3d_cli.geometry.camera import project
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, RevolutionFit, fit_revolution,
                                                  off_table_readings, raw_support)
+
+BASE_SHARE = 0.15  # of the height: the profile's lowest part, whose widest ring is the base
+MIN_AXIS_PX = 10  # pixels the projected axis must span for its upper half to be told apart
 
 
 class ObjectError(ValueError):
@@ -45,16 +49,59 @@ def normalise_mesh(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
 
 
 def check_mask(mask: np.ndarray, cfg: ReconstructConfig) -> None:
-    """Refuse masks a silhouette fit cannot use, with the reason."""
+    """Refuse masks no backend can use (empty, too small), with the reason."""
     area = int(mask.sum())
     if area == 0:
         raise ObjectError("empty mask")
     if area < cfg.min_pixels:
         raise ObjectError(f"mask has {area} px (< reconstruct.min_pixels {cfg.min_pixels})")
-    edge = mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any()
-    if edge and not cfg.allow_border:
-        raise ObjectError("object touches the image border, so its silhouette is cut "
-                          "(set reconstruct.allow_border: true to try anyway)")
+
+
+def border_pixels(mask: np.ndarray) -> np.ndarray:
+    """(n, 2) pixels (x, y) of the mask on the image border."""
+    edge = np.zeros_like(mask, dtype=bool)
+    edge[[0, -1], :] = True
+    edge[:, [0, -1]] = True
+    ys, xs = np.nonzero(mask & edge)
+    return np.column_stack([xs, ys]).astype(np.float64)
+
+
+def cut_above_base(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray) -> bool:
+    """Whether the image border cuts only the upper half of a standing fit and its base ring is
+    in view: then the outline still gives the base, the width and the pose (the model runs on
+    to the border, as the mask does), and only the unseen top is made up."""
+    if fit.resting != "standing":
+        return False
+    h, w = mask.shape
+    z, r = fit.profile[:, 1], fit.profile[:, 0] * fit.height
+    R = fit.T_cam_obj[:3, :3]
+    turn = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    ring = fit.base + r[z <= BASE_SHARE].max() * (np.cos(turn)[:, None] * R[:, 0]
+                                                  + np.sin(turn)[:, None] * R[:, 1])
+    if (ring[:, 2] <= 0).any():
+        return False
+    uv = project(ring, K)
+    if not ((uv >= 1).all() and (uv[:, 0] <= w - 2).all() and (uv[:, 1] <= h - 2).all()):
+        return False
+    b, t = project(np.stack([fit.base, fit.base + fit.height * fit.axis]), K)
+    span = float((t - b) @ (t - b))
+    if span < MIN_AXIS_PX ** 2:  # seen down its axis: no 'upper half' in the image
+        return False
+    return bool((((border_pixels(mask) - b) @ (t - b)) / span >= 0.5).all())
+
+
+def check_border(mask: np.ndarray, cfg: ReconstructConfig, K: np.ndarray,
+                 fit: RevolutionFit | None = None) -> str | None:
+    """Refuse an object the image border cuts, unless only above its base (see
+    :func:`cut_above_base`; needs the ``fit``) or ``allow_border`` is set. Returns 'top' for a
+    standing object cut above its base, else None."""
+    if cfg.allow_border or not border_pixels(mask).size:
+        return None
+    if fit is not None and cut_above_base(fit, mask, K):
+        return "top"
+    where = "" if fit is None else " lower than the upper half of a standing object"
+    raise ObjectError(f"object touches the image border{where}, so its silhouette is cut "
+                      "(set reconstruct.allow_border: true to try anyway)")
 
 
 def configured_fit(mask: np.ndarray, K: np.ndarray, plane: Plane, cfg: ReconstructConfig,
@@ -127,13 +174,17 @@ class Reconstructor:
         cfg = self.cfg
         check_mask(mask, cfg)
         if cfg.backend == "onnx":
+            check_border(mask, cfg, K)
             mesh = normalise_mesh(self.model(rgb, mask))
             return Reconstruction(mesh, {"backend": "onnx"})
         if plane is None:
             raise ObjectError("no support plane: the revolution fit needs the table")
         fit = configured_fit(mask, K, plane, cfg, depth)
+        cut = check_border(mask, cfg, K, fit)
         meta = {"backend": cfg.backend, "resting": fit.resting, "silhouette_iou": round(fit.iou, 4),
                 "pose_hint": {"T_cam_obj": fit.T_cam_obj.tolist(), "scale": fit.height}}
+        if cut:
+            meta["cut_by_border"] = cut  # the top is out of view: its height is a guess
         if cfg.backend == "library":
             name, mesh = self.library.pick(label, fit.profile)
             meta["library_mesh"] = name
