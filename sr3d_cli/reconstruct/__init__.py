@@ -66,13 +66,15 @@ def border_pixels(mask: np.ndarray) -> np.ndarray:
     return np.column_stack([xs, ys]).astype(np.float64)
 
 
-def cut_above_base(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray) -> bool:
-    """Whether the image border cuts only the upper half of a standing fit and its base ring is
-    in view: then the outline still gives the base, the width and the pose (the model runs on
+def cut_above_base(fit: RevolutionFit, edge: np.ndarray, shape: tuple[int, int],
+                   K: np.ndarray) -> bool:
+    """Whether the image (``shape``) border cuts only the upper half of a standing fit (all of
+    the mask's border pixels ``edge``, from :func:`border_pixels`) and its base ring is in
+    view: then the outline still gives the base, the width and the pose (the model runs on
     to the border, as the mask does), and only the unseen top is made up."""
     if fit.resting != "standing":
         return False
-    h, w = mask.shape
+    h, w = shape
     z, r = fit.profile[:, 1], fit.profile[:, 0] * fit.height
     R = fit.T_cam_obj[:3, :3]
     turn = np.linspace(0, 2 * np.pi, 24, endpoint=False)
@@ -87,7 +89,7 @@ def cut_above_base(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray) -> bool:
     span = float((t - b) @ (t - b))
     if span < MIN_AXIS_PX ** 2:  # seen down its axis: no 'upper half' in the image
         return False
-    return bool((((border_pixels(mask) - b) @ (t - b)) / span >= 0.5).all())
+    return bool((((edge - b) @ (t - b)) / span >= 0.5).all())
 
 
 def check_border(mask: np.ndarray, cfg: ReconstructConfig, K: np.ndarray,
@@ -95,9 +97,12 @@ def check_border(mask: np.ndarray, cfg: ReconstructConfig, K: np.ndarray,
     """Refuse an object the image border cuts, unless only above its base (see
     :func:`cut_above_base`; needs the ``fit``) or ``allow_border`` is set. Returns 'top' for a
     standing object cut above its base, else None."""
-    if cfg.allow_border or not border_pixels(mask).size:
+    if cfg.allow_border:
         return None
-    if fit is not None and cut_above_base(fit, mask, K):
+    edge = border_pixels(mask)
+    if not len(edge):
+        return None
+    if fit is not None and cut_above_base(fit, edge, mask.shape, K):
         return "top"
     where = "" if fit is None else " lower than the upper half of a standing object"
     raise ObjectError(f"object touches the image border{where}, so its silhouette is cut "
