@@ -522,7 +522,8 @@ def write_report(results: dict, methods) -> None:
                          f"{100 * m['detection']:.1f} | {m.get('predicted', '-')} | "
                          + (f"{100 * m['precision']:.1f} |" if "precision" in m else "- |"))
         lines += ["", "| resting | objects | median Chamfer / height % |", "|---|---|---|"]
-        for k, v in mesh.get("shape", {}).items():
+        # standing first, whatever order the saved results come back in
+        for k, v in sorted(mesh.get("shape", {}).items(), reverse=True):
             lines.append(f"| {k} | {v['objects']} | {100 * v['median_chamfer_per_height']:.2f} |")
         lines.append("")
     scale = results.get("scale", {})

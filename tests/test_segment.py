@@ -254,6 +254,59 @@ def test_a_goblet_whose_foot_meets_a_flask_is_split_between_them():
     assert min(ious.values()) > 0.95
 
 
+def _evidence(ids: np.ndarray, holes: int = 60, seed: int = 0) -> np.ndarray:
+    """Glass evidence over objects ``ids > 0``: all of them but round holes (2 to 5 px) where
+    the sensor read the table through the glass."""
+    rng = np.random.default_rng(seed)
+    ys, xs = np.nonzero(ids)
+    punched = np.zeros(ids.shape, np.uint8)
+    for _ in range(holes):
+        centre = (int(rng.integers(xs.min(), xs.max() + 1)),
+                  int(rng.integers(ys.min(), ys.max() + 1)))
+        cv2.circle(punched, centre, int(rng.integers(2, 6)), 1, -1)
+    return (ids > 0) & (punched == 0)
+
+
+@pytest.mark.parametrize("gap,behind", [(0.055, 0.0), (0.055, 0.03), (0.06, 0.0)])
+def test_two_glasses_a_few_pixels_apart_are_split_along_their_own_evidence(gap, behind):
+    """Two straight glasses side by side, a few pixels apart: the candidates' closing fills the
+    gap along its whole length, so their region has no neck, and the outline alone keeps one
+    (fat) solid. Their glass evidence comes in two bodies: cut along them, each part is its
+    own glass. One object whose evidence is broken across it (a band of no evidence over a
+    goblet's stem or a bottle's shoulder) stays whole."""
+    from scipy import ndimage
+
+    from sr3d_cli.segment.training_free import _disk, split_touching
+
+    wide = [[0, 0], [0.03, 0], [0.03, 0.1], [0, 0.1]]
+    narrow = [[0, 0], [0.02, 0], [0.02, 0.09], [0, 0.09]]
+    ids, K, plane, _ = _silhouettes([(wide, 0.1, 0.0, 0.0), (narrow, 0.09, -gap, behind)])
+    assert cv2.connectedComponents((ids > 0).astype(np.uint8))[0] == 3  # apart in the image
+    closed = cv2.morphologyEx((ids > 0).astype(np.uint8), cv2.MORPH_CLOSE, _disk(6))
+    region = ndimage.binary_fill_holes(closed)
+    assert cv2.connectedComponents(region.astype(np.uint8))[0] == 2  # one region
+
+    def ious(parts):
+        return instance_ious(np.argmax(np.stack([np.zeros_like(region)] + parts), 0), ids)
+
+    assert min(ious(split_touching(region, K, plane)).values()) < 0.5
+    parts = split_touching(region, K, plane, glass=_evidence(ids))
+    assert len(parts) == 2
+    assert min(ious(parts).values()) > 0.95
+    goblet = [[0, 0], [0.035, 0], [0.033, 0.004], [0.005, 0.01], [0.005, 0.07], [0.03, 0.09],
+              [0.04, 0.13], [0.036, 0.16], [0, 0.16]]
+    bottle = [[0, 0], [0.035, 0], [0.035, 0.14], [0.012, 0.18], [0.012, 0.22], [0, 0.22]]
+    for profile, height in ((goblet, 0.16), (bottle, 0.22)):
+        ids, K, plane, _ = _silhouettes([(profile, height, 0.0, 0.0)])
+        ys = np.nonzero(ids)[0]
+        for share in (0.2, 0.35, 0.5, 0.65):
+            glass = _evidence(ids)
+            row = int(ys.min() + share * np.ptp(ys))
+            glass[row - 3:row + 4] = False
+            assert cv2.connectedComponents(glass.astype(np.uint8))[0] >= 3
+            assert len(split_touching(ids > 0, K, plane, glass=glass)) == 1
+
+
 def test_a_glass_beside_a_can_does_not_take_in_the_table_between_them(monkeypatch):
     """A glass (missing readings, some read through it) 9 px from an opaque can whose side
     casts a 4 px band of missing readings (a stereo camera's shadow): the glass's mask keeps

@@ -18,9 +18,10 @@ The steps:
 5. each candidate refined by GrabCut in a window around it (colour edges), seeded with the
    evidence as probable foreground and the opaque pixels as background;
 6. a region of touching objects split at its narrow necks (distance-transform watershed), at
-   thin parts hanging off it, or between groups of its readings that stand apart on the table
-   (one object behind another), kept split only where solids of revolution on the table
-   explain the parts clearly better than the whole (the revolution fit of
+   thin parts hanging off it, between separate bodies of its glass evidence (two glasses a few
+   pixels apart, whose gap the closing filled), or between groups of its readings that stand
+   apart on the table (one object behind another), kept split only where solids of revolution
+   on the table explain the parts clearly better than the whole (the revolution fit of
    :mod:`sr3d_cli.reconstruct.revolution_fit`).
 """
 
@@ -284,7 +285,8 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
         pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
     out = []
     for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
-        for mask in split_touching(region, K, plane, depth=depth_m, min_area=min_area):
+        for mask in split_touching(region, K, plane, depth=depth_m, glass=glass,
+                                   close_radius=close_radius, min_area=min_area):
             if mask.sum() >= min_area:
                 out.append(Candidate(mask, float(glass[mask].mean())))
     return sorted(out, key=lambda c: -int(c.mask.sum()))
@@ -365,6 +367,34 @@ def _attachments(region: np.ndarray, min_area: int) -> tuple[np.ndarray, list[np
     return body, [labels == k for k in range(1, count) if stats[k, 4] >= min_area]
 
 
+def _evidence_cuts(region: np.ndarray, glass: np.ndarray, min_area: int, close_radius: int, *,
+                   most: int = 3) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Cuts of a region along its own glass evidence. Where that evidence comes in separate
+    bodies of at least ``min_area`` pixels (the ``most`` largest), each body is closed by
+    ``close_radius`` and filled, as a candidate is, and takes the region's pixels nearest to it
+    within that outline; each body in turn is cut from the others. Two glasses side by side a
+    few pixels apart leave two bodies of evidence, but the closing that made their candidate
+    bridged the gap along its whole length, so the region has no neck to cut at; the gap's
+    pixels go with neither part."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(
+        (glass & region).astype(np.uint8), 8)
+    big = [k for k in np.argsort(-stats[:, 4]) if k > 0 and stats[k, 4] >= min_area][:most]
+    if len(big) < 2:
+        return []
+    seeds = np.where(np.isin(labels, big), labels, 0)
+    iy, ix = ndimage.distance_transform_edt(seeds == 0, return_distances=False,
+                                            return_indices=True)
+    nearest = seeds[iy, ix]
+    parts = []
+    for k in big:
+        body = cv2.morphologyEx((labels == k).astype(np.uint8), cv2.MORPH_CLOSE,
+                                _disk(close_radius))
+        parts.append(region & (nearest == k) & ndimage.binary_fill_holes(body))
+    if len(parts) == 2:
+        return [(parts[0], parts[1])]
+    return [(a, np.any([b for b in parts if b is not a], axis=0)) for a in parts]
+
+
 def _footprint_cut(region: np.ndarray, xs: np.ndarray, ys: np.ndarray, raw: np.ndarray,
                    K: np.ndarray, plane: Plane, min_apart: float, min_area: int
                    ) -> tuple[np.ndarray, np.ndarray] | None:
@@ -404,15 +434,18 @@ def _footprint_cut(region: np.ndarray, xs: np.ndarray, ys: np.ndarray, raw: np.n
 
 
 def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
-                   depth: np.ndarray | None = None, max_pieces: int = 4,
+                   depth: np.ndarray | None = None, glass: np.ndarray | None = None,
+                   close_radius: int = 6, max_pieces: int = 4,
                    gain: float = SPLIT_GAIN, min_share: float = 0.2, min_area: int = 150,
                    whole=None, rounds: int = 2) -> list[np.ndarray]:
     """Split a region made of touching objects where solids of revolution on the table explain
     the parts clearly better than one explains the whole.
 
-    Three kinds of cut are tried. The region is cut into watershed pieces of the distance to its
+    Four kinds of cut are tried. The region is cut into watershed pieces of the distance to its
     edge (at most ``max_pieces``), and every grouping of them into two connected parts, each at
     least ``min_share`` of the region (a sliver of background fits anything), is a candidate; so
+    is, with the ``glass`` evidence map, the cut between its separate bodies of evidence
+    (:func:`_evidence_cuts`, parts closed by ``close_radius``, held like a watershed cut); so
     are every thin part hanging off the body (:func:`_attachments`, at least ``min_area``
     pixels) and, with raw ``depth``, the cut between two groups of readings that stand apart on
     the table (:func:`_footprint_cut`: one object behind another). A cut holds by the outline
@@ -446,6 +479,9 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             a = np.isin(labels, first)
             if min(a.sum(), area - a.sum()) >= min_share * area:
                 cuts.append((a, region & ~a))
+    if glass is not None:
+        cuts += [(a, b) for a, b in _evidence_cuts(region, glass, min_area, close_radius)
+                 if min(a.sum(), b.sum()) >= min_share * area]
     readings = None
     if depth is not None:
         every = off_table_readings(region, depth, K, plane, samples=int(area))
@@ -507,7 +543,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     if best is None:
         return [region]
     return [part for mask, own in best[1]
-            for part in split_touching(mask, K, plane, depth=depth, max_pieces=max_pieces,
+            for part in split_touching(mask, K, plane, depth=depth, glass=glass,
+                                       close_radius=close_radius, max_pieces=max_pieces,
                                        gain=gain, min_share=min_share, min_area=min_area,
                                        whole=own, rounds=rounds - 1)]
 
