@@ -221,18 +221,20 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
                 raise ValueError(why)
         scene = depth_cloud(depth, K, ids, cfg.stride)
         targets = {int(k): scene.select(scene.labels == k) for k in np.unique(ids) if k > 0}
+        surfaces = {}
         if depth_source == "repaired":
             placed = []
             for obj in poses.get("objects", []):
                 k = int(obj["id"])
                 mesh = load_mesh(find_mesh(source, fid, k))
-                placed.append(mesh_cloud(mesh, np.asarray(obj["T_cam_obj"]),
-                                         float(obj["scale"]), k, cfg.mesh_points, seed=k))
+                T, scale = np.asarray(obj["T_cam_obj"]), float(obj["scale"])
+                placed.append(mesh_cloud(mesh, T, scale, k, cfg.mesh_points, seed=k))
                 targets[k] = in_view(placed[-1], K, depth.shape)
+                surfaces[k] = place_points(mesh.vertices, T, scale)[mesh.faces]
             scene = Cloud.concat([scene] + placed)
         if only is not None:
             targets = {only: targets[only]}
-        grasps, messages = planner.plan(scene, targets, plane)
+        grasps, messages = planner.plan(scene, targets, plane, surfaces)
     except (InputError, ValueError) as exc:
         messages.append(str(exc))
     document = {"source": depth_source, "grasps": grasps.to_json(), "failed": messages,

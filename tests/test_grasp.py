@@ -316,3 +316,35 @@ def test_grasp_end_to_end_beats_raw_depth(synth_set, tmp_path):
         assert np.load(out / "grasps" / "000000_hand_poses.npy").shape[1:] == (4, 4)
     assert wins["repaired"] / objects >= 0.5
     assert wins["repaired"] > wins["raw"]
+
+
+def test_the_placed_mesh_rescores_the_best_grasps_by_their_exact_contacts():
+    """A goblet and a wine glass (curved bowls, a stem, a rim): the planner's patch normals
+    average over sampled points, so its best grasps by them need more friction, with the jaws
+    closed exactly onto the mesh, than the best found by scoring them again with those exact
+    contacts. Measured over 10 seeds, mean exact mu of the best grasp: goblet .188 -> .148,
+    wine glass .230 -> .192 (scoring all ten again: .10 and .13, at three times the cost)."""
+    profiles = {
+        "goblet": revolve(np.array([[0, 0], [0.035, 0], [0.033, 0.004], [0.005, 0.01],
+                                    [0.005, 0.07], [0.03, 0.09], [0.04, 0.13], [0.036, 0.16],
+                                    [0, 0.16]]), 64),
+        "wine glass": revolve(open_vessel([(0, 0), (0.03, 0), (0.005, 0.01), (0.005, 0.06),
+                                           (0.035, 0.09), (0.04, 0.13)], 0.002, 0.07), 64)}
+    for name, solid in profiles.items():
+        mesh = _on_table(solid)
+        target = mesh_cloud(mesh, np.eye(4), 1.0, 1, 2400)
+        scene = Cloud.concat([_table_cloud(), target])
+        best = {}
+        for surfaces in (None, {1: np.asarray(mesh.triangles)}):
+            mus = []
+            for seed in range(10):
+                cfg = Config().grasp
+                cfg.seed = seed
+                grasps, _ = Planner(cfg).plan(scene, {1: target}, PLANE, surfaces)
+                record = judge(grasps.sorted().take(slice(0, 1)), _truth([mesh]), GRIPPER)[0]
+                assert record["reason"] == "ok", name
+                mus.append(record["mu"])
+            best[surfaces is not None] = np.mean(mus)
+            if surfaces is not None:
+                assert max(mus) <= 0.3, name
+        assert best[True] <= {"goblet": 0.85, "wine glass": 0.9}[name] * best[False], (name, best)

@@ -8,7 +8,9 @@ around the table normal, perpendicular to it. Each candidate frame is tried at s
 the fingers and palm must hold no scene point and stay above the table, and the contact normals
 must lie inside the friction cone. Score: friction margin, opening margin, approach from above and
 a grasp centre near half the object's height, weighted (config). Non-maximum suppression, then the
-best K per object. An object where nothing holds gets other seed points (``redraws``).
+best K per object; where the object has a placed mesh, those K are scored again with the friction
+their exact contacts on it need (the jaws closed onto its triangles, as the evaluator closes them
+on a true mesh). An object where nothing holds gets other seed points (``redraws``).
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
@@ -17,7 +19,7 @@ the depth sees.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -110,18 +112,25 @@ def nms(grasps: GraspSet, distance: float, angle_rad: float) -> GraspSet:
     return g.take(np.array(keep, dtype=np.int64))
 
 
+EXACT_MU_CAP = 2.0  # friction coefficient counted for exact contacts needing more (Planner._rescore)
+EXACT_FIRST = 3  # best grasps per object always scored by exact contacts (Planner._rescore)
+
+
 class Planner:
     def __init__(self, cfg):
         self.cfg = cfg
         self.gripper = Gripper.from_config(cfg)
 
-    def plan(self, scene: Cloud, targets: dict[int, Cloud], plane: Plane
-             ) -> tuple[GraspSet, list[str]]:
+    def plan(self, scene: Cloud, targets: dict[int, Cloud], plane: Plane,
+             surfaces: dict[int, np.ndarray] | None = None) -> tuple[GraspSet, list[str]]:
         """Grasps for every object in ``targets`` (contact points), checked against ``scene``
-        (every point that can collide, targets included). Returns (grasps, object messages)."""
+        (every point that can collide, targets included). ``surfaces``: the placed mesh's
+        triangles (m, 3, 3) of objects that have one; their best grasps are scored again with
+        the jaws closed exactly on it (:meth:`_rescore`). Returns (grasps, object messages)."""
         sets, messages = [], []
+        surfaces = surfaces or {}
         for k in sorted(targets):
-            found, why = self._object(k, targets[k], scene, plane)
+            found, why = self._object(k, targets[k], scene, plane, surfaces.get(k))
             if len(found) == 0:
                 messages.append(f"object {k}: no grasp ({why})")
             sets.append(found)
@@ -129,12 +138,14 @@ class Planner:
 
     # -- one object -----------------------------------------------------------------------------
 
-    def _object(self, k: int, target: Cloud, scene: Cloud, plane: Plane) -> tuple[GraspSet, str]:
+    def _object(self, k: int, target: Cloud, scene: Cloud, plane: Plane,
+                surface: np.ndarray | None = None) -> tuple[GraspSet, str]:
         cfg, g = self.cfg, self.gripper
         has_normal = np.linalg.norm(target.normals, axis=1) > 0.5
         target = target.select(has_normal)
         if len(target.points) < 20:
             return GraspSet.empty(), f"{len(target.points)} surface points, too few"
+        top = max(float(plane.height(target.points).max()), 1e-6)
         centre = target.points.mean(axis=0)
         near = np.linalg.norm(scene.points - centre, axis=1) < \
             g.reach() + np.ptp(target.points, axis=0).max()
@@ -149,7 +160,7 @@ class Planner:
             R, c, span = self._frames(target, plane, rng)
             pairs += len(R)
             found = [self._try_frames(k, R[s:s + 48], c[s:s + 48], span[s:s + 48], target,
-                                      scene, plane)
+                                      scene, plane, top)
                      for s in range(0, len(R), 48)]
             grasps = GraspSet.concat([f for f in found if f is not None])
             if len(grasps):
@@ -160,7 +171,49 @@ class Planner:
             return grasps, (f"no collision-free grasp inside the friction cone within the "
                             f"{g.max_width:.3f} m opening")
         grasps = nms(grasps, cfg.nms_distance, np.radians(cfg.nms_angle))
-        return grasps.take(slice(0, cfg.top_k)), ""
+        grasps = grasps.take(slice(0, cfg.top_k))
+        if surface is not None:
+            grasps = self._rescore(grasps, k, surface, plane, top)
+        return grasps, ""
+
+    def score(self, mu: np.ndarray, width: np.ndarray, R: np.ndarray, centre: np.ndarray,
+              plane: Plane, top: float) -> np.ndarray:
+        """Grasp scores: friction margin (``mu``: the least coefficient that holds), opening
+        margin, approach from above, and a centre near half the object's height (``top``: its
+        height above the table), 1 there and 0 at the table and at the top: near the centre of
+        mass, and away from rims and shoulders, where a model's small height error moves the
+        surface the most; weighted (config)."""
+        cfg = self.cfg
+        approach_up = np.clip(R[:, :, 0] @ -plane.normal, 0, 1)
+        centred = 1 - 2 * np.abs(np.clip(plane.height(centre) / top, 0, 1) - 0.5)
+        return (cfg.friction_weight * (1 - mu / cfg.friction)
+                + cfg.width_weight * (1 - width / self.gripper.max_width)
+                + cfg.approach_weight * approach_up
+                + cfg.centre_weight * centred)
+
+    def _rescore(self, grasps: GraspSet, k: int, surface: np.ndarray, plane: Plane,
+                 top: float) -> GraspSet:
+        """Score again with the friction the contacts need where the jaws, closed along the
+        closing direction, first touch the placed mesh (``surface`` triangles), as the grasp
+        evaluator closes them on a true mesh: the patch normals of :meth:`_try_frames` average
+        over sampled points and pass grasps on a rim or a sloped wall whose exact contacts need
+        far more. Best first, until the best is one scored so (each costs a ray cast; most
+        objects need one to three). A contact needing more than :data:`EXACT_MU_CAP` (or none)
+        counts as that."""
+        from sr3d_cli.grasp.quality import close_jaws
+
+        scores, checked = grasps.scores.copy(), np.zeros(len(grasps), bool)
+        todo = list(np.argsort(-scores, kind="stable")[:EXACT_FIRST])
+        while len(grasps):
+            i = int(todo.pop(0)) if todo else int(np.argmax(scores))
+            if checked[i]:
+                break
+            mu = close_jaws(grasps.R[i], grasps.t[i], float(grasps.widths[i]),
+                            float(grasps.depths[i]), [k], [surface], self.gripper)[2]
+            scores[i] = self.score(np.array([min(mu, EXACT_MU_CAP)]), grasps.widths[i:i + 1],
+                                   grasps.R[i:i + 1], grasps.t[i:i + 1], plane, top)[0]
+            checked[i] = True
+        return replace(grasps, scores=scores).sorted()
 
     def _seed_points(self, points: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Indices of ``seeds`` points spread evenly along the object's longest axis: the points
@@ -251,7 +304,7 @@ class Planner:
         edge_lo = np.where(lo_ok.any(1), nb - 1 - np.argmax(lo_ok[:, ::-1], 1) + gap - 1, -1)
         return (b > edge_lo[:, None]) & (b < edge_hi[:, None])
 
-    def _try_frames(self, k, R, c, span, target: Cloud, scene: Cloud, plane: Plane
+    def _try_frames(self, k, R, c, span, target: Cloud, scene: Cloud, plane: Plane, top: float
                     ) -> GraspSet | None:
         """The best depth of each frame that holds: the object's section between the jaws (see
         :meth:`_between_jaws`) sets the opening; fingers and palm, inflated by
@@ -277,9 +330,6 @@ class Planner:
         # scene points in each frame, computed for a frame only once it reaches the collision test
         local_s = np.empty((len(R), len(scene.points), 3), np.float32)
         placed = np.zeros(len(R), bool)
-        down = -plane.normal
-        approach_up = np.clip(R[:, :, 0] @ down, 0, 1)
-        top = max(float(plane.height(target.points).max()), 1e-6)
         best = np.full(len(R), -1.0)
         out = np.zeros((len(R), 4))                               # width, depth, ymid, score
         for depth in sorted(cfg.depths, reverse=True):
@@ -328,15 +378,8 @@ class Planner:
             corners = to_camera(R[idx], centre, g.corners(width[idx], dd))
             ok[idx] = (hits < cfg.collision_points) & \
                 (plane.height(corners).min(axis=1) >= cfg.clearance)
-            # 1 at half the object's height, 0 at the table and at the top: near the centre of
-            # mass, and away from rims and shoulders, where a model's small height error moves
-            # the surface the most
-            centred = np.zeros(len(R))
-            centred[idx] = 1 - 2 * np.abs(np.clip(plane.height(centre) / top, 0, 1) - 0.5)
-            score = (cfg.friction_weight * (1 - mu_needed / cfg.friction)
-                     + cfg.width_weight * (1 - width / g.max_width)
-                     + cfg.approach_weight * approach_up
-                     + cfg.centre_weight * centred)
+            score = np.zeros(len(R))
+            score[idx] = self.score(mu_needed[idx], width[idx], R[idx], centre, plane, top)
             take = ok & (best < 0)
             best[take] = score[take]
             out[take] = np.stack([width, np.full(len(R), depth), ymid, score], 1)[take]
