@@ -367,6 +367,13 @@ def _attachments(region: np.ndarray, min_area: int) -> tuple[np.ndarray, list[np
     return body, [labels == k for k in range(1, count) if stats[k, 4] >= min_area]
 
 
+def _nearest_seed(seeds: np.ndarray) -> np.ndarray:
+    """Every pixel's nearest non-zero label of ``seeds`` (H, W)."""
+    iy, ix = ndimage.distance_transform_edt(seeds == 0, return_distances=False,
+                                            return_indices=True)
+    return seeds[iy, ix]
+
+
 def _evidence_cuts(region: np.ndarray, glass: np.ndarray, min_area: int, close_radius: int, *,
                    most: int = 3) -> list[tuple[np.ndarray, np.ndarray]]:
     """Cuts of a region along its own glass evidence. Where that evidence comes in separate
@@ -381,10 +388,7 @@ def _evidence_cuts(region: np.ndarray, glass: np.ndarray, min_area: int, close_r
     big = [k for k in np.argsort(-stats[:, 4]) if k > 0 and stats[k, 4] >= min_area][:most]
     if len(big) < 2:
         return []
-    seeds = np.where(np.isin(labels, big), labels, 0)
-    iy, ix = ndimage.distance_transform_edt(seeds == 0, return_distances=False,
-                                            return_indices=True)
-    nearest = seeds[iy, ix]
+    nearest = _nearest_seed(np.where(np.isin(labels, big), labels, 0))
     parts = []
     for k in big:
         body = cv2.morphologyEx((labels == k).astype(np.uint8), cv2.MORPH_CLOSE,
@@ -420,9 +424,7 @@ def _footprint_cut(region: np.ndarray, xs: np.ndarray, ys: np.ndarray, raw: np.n
         return None
     seeds = np.zeros(region.shape, np.uint8)
     seeds[ys, xs] = np.where(side, 2, 1)
-    iy, ix = ndimage.distance_transform_edt(seeds == 0, return_distances=False,
-                                            return_indices=True)
-    first = region & (seeds[iy, ix] == 1)
+    first = region & (_nearest_seed(seeds) == 1)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(first.astype(np.uint8), 8)
     if count < 2:
         return None
