@@ -55,6 +55,13 @@ class Gripper:
         c = np.stack([b[..., sel[:, 0], 0], b[..., sel[:, 1], 1], b[..., sel[:, 2], 2]], -1)
         return c.reshape(*c.shape[:-3], 24, 3)
 
+    def lowest(self, R: np.ndarray, t: np.ndarray, width, depth, plane) -> np.ndarray:
+        """Height above ``plane`` of the lowest corner of each gripper (rotation ``R (..., 3,
+        3)``, centre ``t (..., 3)``, opening ``width``, ``depth``): ``(...)``."""
+        up = np.einsum("...ij,i->...j", R, plane.normal)          # the table normal, grasp frame
+        return np.min(self.corners(width, depth) @ up[..., None], axis=(-2, -1)) + \
+            plane.height(t)
+
     def reach(self) -> float:
         """Radius around the grasp centre that holds the whole gripper."""
         back = self.finger_length + self.palm_depth
@@ -62,35 +69,31 @@ class Gripper:
 
 
 def count_inside(local: np.ndarray, boxes: np.ndarray, shrink: float = 0.0) -> np.ndarray:
-    """Points inside each box. local : (F, M, 3) grasp-frame points; boxes : (F, B, 2, 3).
-    Returns (F, B) counts."""
+    """Points inside each box. local : (F, 3, M) grasp-frame coordinates, axis by axis (as
+    :func:`to_local` gives them); boxes : (F, B, 2, 3), each shrunk by ``shrink`` on every side
+    (negative: inflated). Returns (F, B) counts."""
+    lo = (boxes[:, :, 0] + shrink).astype(local.dtype)[..., None]     # (F, B, 3, 1)
+    hi = (boxes[:, :, 1] - shrink).astype(local.dtype)[..., None]
+    x, y, z = local[:, 0], local[:, 1], local[:, 2]
     counts = np.zeros(boxes.shape[:2], dtype=np.int64)
-    slabs: dict[tuple, np.ndarray] = {}  # the fingers share their x and z extents: test once
-
-    def between(axis, lo, hi):
-        key = (axis, lo.tobytes(), hi.tobytes())
-        if key not in slabs:
-            v = local[..., axis]
-            slabs[key] = (v > lo[:, None] + shrink) & (v < hi[:, None] - shrink)
-        return slabs[key]
-
+    slabs: dict[bytes, np.ndarray] = {}  # the fingers share their x and z extents: test once
     for b in range(boxes.shape[1]):
-        lo, hi = boxes[:, b, 0], boxes[:, b, 1]
-        key = ("xz", lo[:, ::2].tobytes(), hi[:, ::2].tobytes())
+        key = lo[:, b, ::2].tobytes() + hi[:, b, ::2].tobytes()
         if key not in slabs:
-            slabs[key] = between(0, lo[:, 0], hi[:, 0]) & between(2, lo[:, 2], hi[:, 2])
-        counts[:, b] = (slabs[key] & between(1, lo[:, 1], hi[:, 1])).sum(axis=1)
+            slabs[key] = (x > lo[:, b, 0]) & (x < hi[:, b, 0]) & (z > lo[:, b, 2]) & \
+                (z < hi[:, b, 2])
+        inside = slabs[key] & (y > lo[:, b, 1]) & (y < hi[:, b, 1])
+        counts[:, b] = inside.view(np.uint8).sum(axis=1, dtype=np.int64)
     return counts
 
 
-def to_camera(R: np.ndarray, t: np.ndarray, local: np.ndarray) -> np.ndarray:
-    """Grasp-frame points ``(..., n, 3)`` of grasps ``R (..., 3, 3)``, ``t (..., 3)`` in the
-    camera frame."""
-    return np.einsum("...ij,...nj->...ni", R, local) + t[..., None, :]
-
-
 def to_local(R: np.ndarray, t: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Camera-frame points ``(n, 3)`` in the frames of grasps ``R (F, 3, 3)``, ``t (F, 3)``:
-    ``(F, n, 3)``."""
+    """Camera-frame points ``(n, 3)`` in the frames of grasps ``R (F, 3, 3)``, ``t (F, 3)``,
+    axis by axis: ``(F, 3, n)`` float32 (each axis's row contiguous: the box tests of
+    :func:`count_inside` run along rows, several times faster than on (F, n, 3))."""
     R = np.asarray(R, dtype=np.float32)
-    return np.asarray(points, dtype=np.float32) @ R - (t.astype(np.float32)[:, None] @ R)
+    t = np.asarray(t, dtype=np.float32)
+    F = len(R)
+    rows = R.transpose(0, 2, 1).reshape(3 * F, 3)                   # frame axes as rows
+    local = rows @ np.asarray(points, dtype=np.float32).T - (rows * np.repeat(t, 3, 0)).sum(1)[:, None]
+    return local.reshape(F, 3, -1)

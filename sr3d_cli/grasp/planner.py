@@ -27,7 +27,7 @@ from sr3d_cli.geometry.camera import depth_normals, depth_to_points, project
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points
 from sr3d_cli.grasp import GraspSet
-from sr3d_cli.grasp.gripper import Gripper, count_inside, to_camera, to_local
+from sr3d_cli.grasp.gripper import Gripper, count_inside, to_local
 
 
 @dataclass
@@ -77,6 +77,11 @@ def in_view(cloud: Cloud, K: np.ndarray, shape: tuple[int, int]) -> Cloud:
     front = cloud.points[:, 2] > 0
     u, v = project(np.where(front[:, None], cloud.points, [0.0, 0.0, 1.0]), K).T
     return cloud.select(front & (u >= 0) & (u <= shape[1] - 1) & (v >= 0) & (v <= shape[0] - 1))
+
+
+def _masked_sum(local: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Sum over the points ``mask (F, K)`` selects of axis-major ``local (F, 3, K)``: (F, 3)."""
+    return np.einsum("fak,fk->fa", local, mask.astype(local.dtype))
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -240,7 +245,7 @@ class Planner:
         s, n = target.points[seeds], target.normals[seeds]
         v = target.points[None] - s[:, None]                     # (S, M, 3)
         along = -np.einsum("smk,sk->sm", v, n)                   # distance into the object
-        off_line = np.linalg.norm(v + along[..., None] * n[:, None], axis=-1)
+        off_line = np.sqrt(np.maximum(np.einsum("smk,smk->sm", v, v) - along ** 2, 0))
         facing = np.einsum("mk,sk->sm", target.normals, n) < -0.3
         ok = (off_line < cfg.pair_radius) & (along > 0.0015) & (along < g.max_width) & facing
         # two partners per seed: the farthest (across the whole object) and the nearest (across
@@ -279,19 +284,30 @@ class Planner:
             spans.append(np.linalg.norm(p - q, axis=1)[up_ok])
         return np.concatenate(Rs), np.concatenate(cs), np.concatenate(spans)
 
-    def _between_jaws(self, y: np.ndarray, slab: np.ndarray, span: np.ndarray,
-                      bin_size: float = 0.001) -> np.ndarray:
-        """Which slab points the jaws enclose: from the seed pair (+-span/2) outwards on each
-        side, up to the first empty gap a finger fits in. y, slab : (F, M); span : (F,)."""
+    def _y_bins(self, y: np.ndarray, bin_size: float = 0.001):
+        """Bins along the closing direction for :meth:`_between_jaws`, from the slab points'
+        y (F, K), once per set of frames: (bin of each point, clipped to the jaws' reach; its
+        index among all frames' bins, or one past them when out of reach; bins per frame)."""
         g = self.gripper
         reach = g.max_width + g.finger_thickness
         nb = int(np.ceil(2 * reach / bin_size))
         b = np.clip(((y + reach) / bin_size).astype(np.int64), 0, nb - 1)
-        use = slab & (np.abs(y) < reach)
-        f = np.broadcast_to(np.arange(len(y))[:, None], y.shape)
-        occ = np.bincount((f * nb + b)[use], minlength=len(y) * nb).reshape(len(y), nb) > 0
+        flat = np.where(np.abs(y) < reach, b + nb * np.arange(len(y))[:, None], nb * len(y))
+        return b, flat, nb
+
+    def _between_jaws(self, bins, slab: np.ndarray, span: np.ndarray,
+                      bin_size: float = 0.001) -> np.ndarray:
+        """Which slab points the jaws enclose: from the seed pair (+-span/2) outwards on each
+        side, up to the first empty gap a finger fits in. bins: :meth:`_y_bins` of the points'
+        y; slab : (F, K); span : (F,)."""
+        g = self.gripper
+        b, flat, nb = bins
+        F = len(slab)
+        reach = g.max_width + g.finger_thickness
+        occ = np.bincount(np.where(slab, flat, nb * F).ravel(),
+                          minlength=nb * F + 1)[:-1].reshape(F, nb) > 0
         gap = max(int(np.ceil(g.finger_thickness / bin_size)), 1)
-        csum = np.concatenate([np.zeros((len(y), 1), np.int64), np.cumsum(occ, 1)], 1)
+        csum = np.concatenate([np.zeros((F, 1), np.int64), np.cumsum(occ, 1)], 1)
         empty = np.zeros_like(occ)
         empty[:, :nb - gap + 1] = (csum[:, gap:] - csum[:, :-gap]) == 0  # gap starts at bin
         idx = np.arange(nb)
@@ -313,30 +329,27 @@ class Planner:
         cfg, g = self.cfg, self.gripper
         L, H = g.finger_length, g.finger_height
         # only points that some depth's finger slab can hold matter: find them from their
-        # approach (x) and height (z) coordinates, pack them to the front of each row, cut the
-        # rows to the longest such list, and take full grasp-frame coordinates of those alone
+        # approach (x) and height (z) coordinates, pack them to the front of each row, and cut
+        # the rows to the longest such list (coordinates axis by axis: (F, 3, K))
         m = cfg.collision_margin
-        pts, c32 = target.points.astype(np.float32), c.astype(np.float32)[:, None]
-        Rxz = R[:, :, [0, 2]].astype(np.float32)                  # (F, 3, 2)
-        xz = pts @ Rxz - c32 @ Rxz                                # (F, M, 2)
-        can = (np.abs(xz[..., 1]) < H / 2 + m) & \
-            (xz[..., 0] > min(cfg.depths) - L - m) & (xz[..., 0] < max(cfg.depths) + m)
+        local_t = to_local(R, c, target.points)                   # (F, 3, M)
+        x, z = local_t[:, 0], local_t[:, 2]
+        can = (np.abs(z) < H / 2 + m) & (x > min(cfg.depths) - L - m) & (x < max(cfg.depths) + m)
         keep = max(int(can.sum(axis=1).max()), 1)
         order = np.argsort(~can, axis=1, kind="stable")[:, :keep]  # (F, K)
         can = np.take_along_axis(can, order, 1)
-        R32 = R.astype(np.float32)
-        local_t = (pts[order] - c32) @ R32                        # (F, K, 3)
-        local_n = target.normals.astype(np.float32)[order] @ R32
-        # scene points in each frame, computed for a frame only once it reaches the collision test
-        local_s = np.empty((len(R), len(scene.points), 3), np.float32)
-        placed = np.zeros(len(R), bool)
+        local_t = np.take_along_axis(local_t, order[:, None], 2)
+        local_n = np.take_along_axis(to_local(R, np.zeros_like(c), target.normals),
+                                     order[:, None], 2)
+        x, y, z = local_t[:, 0], local_t[:, 1], local_t[:, 2]
+        bins = self._y_bins(y)
+        local_s = None  # scene points in each frame, once some frame reaches the collision test
         best = np.full(len(R), -1.0)
         out = np.zeros((len(R), 4))                               # width, depth, ymid, score
         for depth in sorted(cfg.depths, reverse=True):
-            x, y, z = local_t[..., 0], local_t[..., 1], local_t[..., 2]
             # the section under the (inflated) finger pads
             slab = can & (x > depth - L - m) & (x < depth + m) & (np.abs(z) < H / 2 + m)
-            slab &= self._between_jaws(y, slab, span)
+            slab &= self._between_jaws(bins, slab, span)
             count = slab.sum(axis=1)
             y_lo = np.where(slab, y, np.inf).min(axis=1)
             y_hi = np.where(slab, y, -np.inf).max(axis=1)
@@ -349,15 +362,13 @@ class Planner:
             # contact normals: the outermost slab points on each side
             # (of surfaces facing each finger: across a thin wall, the inner surface's points
             # lie in the band too, facing the other way)
-            left = slab & (y < y_lo[:, None] + cfg.contact_band) & (local_n[..., 1] < 0)
-            right = slab & (y > y_hi[:, None] - cfg.contact_band) & (local_n[..., 1] > 0)
-            n_left = _unit((left[:, None].astype(np.float32) @ local_n)[:, 0])
-            n_right = _unit((right[:, None].astype(np.float32) @ local_n)[:, 0])
+            left = slab & (y < y_lo[:, None] + cfg.contact_band) & (local_n[:, 1] < 0)
+            right = slab & (y > y_hi[:, None] - cfg.contact_band) & (local_n[:, 1] > 0)
+            n_left = _unit(_masked_sum(local_n, left))
+            n_right = _unit(_masked_sum(local_n, right))
             # the line between the two contact patches (their centroids)
-            c_left = (left[:, None].astype(np.float32) @ local_t)[:, 0] / \
-                np.maximum(left.sum(1), 1)[:, None]
-            c_right = (right[:, None].astype(np.float32) @ local_t)[:, 0] / \
-                np.maximum(right.sum(1), 1)[:, None]
+            c_left = _masked_sum(local_t, left) / np.maximum(left.sum(1), 1)[:, None]
+            c_right = _masked_sum(local_t, right) / np.maximum(right.sum(1), 1)[:, None]
             line = _unit(c_right - c_left)
             ang = np.maximum(np.arccos(np.clip(-np.sum(n_left * line, 1), -1, 1)),
                              np.arccos(np.clip(np.sum(n_right * line, 1), -1, 1)))
@@ -368,16 +379,13 @@ class Planner:
             idx = np.flatnonzero(ok)                              # collisions: survivors only
             dd = np.full(len(idx), depth)
             boxes = g.boxes(width[idx], dd)                       # (f, 3, 2, 3)
-            fresh = idx[~placed[idx]]
-            local_s[fresh] = to_local(R[fresh], c[fresh], scene.points)
-            placed[fresh] = True
-            shifted = local_s[idx]
-            shifted[..., 1] -= ymid[idx, None]
-            hits = count_inside(shifted, boxes, shrink=-cfg.collision_margin).max(axis=1)
+            boxes[..., 1] += ymid[idx, None, None]                # centred between the jaws
+            if local_s is None:
+                local_s = to_local(R, c, scene.points)
+            hits = count_inside(local_s[idx], boxes, shrink=-cfg.collision_margin).max(axis=1)
             centre = c[idx] + R[idx, :, 1] * ymid[idx, None]
-            corners = to_camera(R[idx], centre, g.corners(width[idx], dd))
             ok[idx] = (hits < cfg.collision_points) & \
-                (plane.height(corners).min(axis=1) >= cfg.clearance)
+                (g.lowest(R[idx], centre, width[idx], dd, plane) >= cfg.clearance)
             score = np.zeros(len(R))
             score[idx] = self.score(mu_needed[idx], width[idx], R[idx], centre, plane, top)
             take = ok & (best < 0)

@@ -20,7 +20,7 @@ import numpy as np
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.raycast import first_hits
 from sr3d_cli.grasp import GraspSet
-from sr3d_cli.grasp.gripper import Gripper, count_inside, to_camera, to_local
+from sr3d_cli.grasp.gripper import Gripper, count_inside, to_local
 
 FRICTIONS = (0.2, 0.4, 0.5, 0.6, 0.8, 1.0, 1.2)
 
@@ -160,8 +160,7 @@ def judge(grasps: GraspSet, truth: TrueScene, gripper: Gripper, *, tolerance: fl
         if w > gripper.max_width + 1e-9:
             rec["reason"] = "too wide"
             continue
-        corners = to_camera(R, t, gripper.corners(w, d))
-        if truth.plane.height(corners).min() < -tolerance:
+        if gripper.lowest(R, t, w, d, truth.plane) < -tolerance:
             rec["reason"] = "below table"
             continue
         boxes = gripper.boxes(w, d)[None]
