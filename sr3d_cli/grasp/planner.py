@@ -119,6 +119,8 @@ def nms(grasps: GraspSet, distance: float, angle_rad: float) -> GraspSet:
 
 EXACT_MU_CAP = 2.0  # friction coefficient counted for exact contacts needing more (Planner._rescore)
 EXACT_FIRST = 3  # best grasps per object always scored by exact contacts (Planner._rescore)
+EXACT_POOL = 3   # times top_k grasps the rescoring may reach into (Planner._object)
+THIN_PAIR = 3.0  # a pair shorter than this many pair radii spans a thin wall (Planner._frames)
 
 
 class Planner:
@@ -158,7 +160,8 @@ class Planner:
         # by a gripper that passes it
         scene = scene.select(near & (plane.height(scene.points) >= cfg.clearance))
         # an object with few holdable places (a goblet's stem, a wide beaker's rim) may get no
-        # seed on them: draw other seeds, up to ``redraws`` times, while nothing holds
+        # seed on them: draw other seeds, up to ``redraws`` times, while nothing holds (with a
+        # placed mesh: while the best grasp's exact contacts do not hold)
         rng = np.random.default_rng([cfg.seed, k])
         grasps, pairs = GraspSet.empty(), 0
         for _ in range(1 + cfg.redraws):
@@ -167,19 +170,23 @@ class Planner:
             found = [self._try_frames(k, R[s:s + 48], c[s:s + 48], span[s:s + 48], target,
                                       scene, plane, top)
                      for s in range(0, len(R), 48)]
-            grasps = GraspSet.concat([f for f in found if f is not None])
-            if len(grasps):
+            grasps = GraspSet.concat([grasps] + [f for f in found if f is not None])
+            if len(grasps) == 0:
+                continue
+            grasps = nms(grasps, cfg.nms_distance, np.radians(cfg.nms_angle))
+            if surface is None:
+                break
+            # from a deeper pool: where the exact contacts fail the first ten, the next may hold
+            grasps, mu = self._rescore(grasps.take(slice(0, EXACT_POOL * cfg.top_k)), k,
+                                       surface, plane, top)
+            if mu <= cfg.friction:
                 break
         if pairs == 0:
             return grasps, "no antipodal pair within the gripper's opening"
         if len(grasps) == 0:
             return grasps, (f"no collision-free grasp inside the friction cone within the "
                             f"{g.max_width:.3f} m opening")
-        grasps = nms(grasps, cfg.nms_distance, np.radians(cfg.nms_angle))
-        grasps = grasps.take(slice(0, cfg.top_k))
-        if surface is not None:
-            grasps = self._rescore(grasps, k, surface, plane, top)
-        return grasps, ""
+        return grasps.take(slice(0, cfg.top_k)), ""
 
     def score(self, mu: np.ndarray, width: np.ndarray, R: np.ndarray, centre: np.ndarray,
               plane: Plane, top: float) -> np.ndarray:
@@ -197,28 +204,31 @@ class Planner:
                 + cfg.centre_weight * centred)
 
     def _rescore(self, grasps: GraspSet, k: int, surface: np.ndarray, plane: Plane,
-                 top: float) -> GraspSet:
+                 top: float) -> tuple[GraspSet, float]:
         """Score again with the friction the contacts need where the jaws, closed along the
         closing direction, first touch the placed mesh (``surface`` triangles), as the grasp
         evaluator closes them on a true mesh: the patch normals of :meth:`_try_frames` average
         over sampled points and pass grasps on a rim or a sloped wall whose exact contacts need
         far more. Best first, until the best is one scored so (each costs a ray cast; most
         objects need one to three). A contact needing more than :data:`EXACT_MU_CAP` (or none)
-        counts as that."""
+        counts as that. Returns the grasps, sorted, and the friction the best one's exact
+        contacts need."""
         from sr3d_cli.grasp.quality import close_jaws
 
         scores, checked = grasps.scores.copy(), np.zeros(len(grasps), bool)
+        mu = np.full(len(grasps), np.inf)
         todo = list(np.argsort(-scores, kind="stable")[:EXACT_FIRST])
         while len(grasps):
             i = int(todo.pop(0)) if todo else int(np.argmax(scores))
             if checked[i]:
                 break
-            mu = close_jaws(grasps.R[i], grasps.t[i], float(grasps.widths[i]),
-                            float(grasps.depths[i]), [k], [surface], self.gripper)[2]
-            scores[i] = self.score(np.array([min(mu, EXACT_MU_CAP)]), grasps.widths[i:i + 1],
+            mu[i] = close_jaws(grasps.R[i], grasps.t[i], float(grasps.widths[i]),
+                               float(grasps.depths[i]), [k], [surface], self.gripper)[2]
+            scores[i] = self.score(np.array([min(mu[i], EXACT_MU_CAP)]), grasps.widths[i:i + 1],
                                    grasps.R[i:i + 1], grasps.t[i:i + 1], plane, top)[0]
             checked[i] = True
-        return replace(grasps, scores=scores).sorted()
+        best = int(np.argmax(scores)) if len(grasps) else 0
+        return replace(grasps, scores=scores).sorted(), float(mu[best]) if len(grasps) else np.inf
 
     def _seed_points(self, points: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Indices of ``seeds`` points spread evenly along the object's longest axis: the points
@@ -261,10 +271,13 @@ class Planner:
         q = target.points[np.concatenate([j_far, j_near[distinct]])]
         # across the whole object the pair's own line closes the jaws; across a thin wall the
         # pair is too close for its line (up to pair_radius off the normal) to mean anything,
-        # so the jaws close along the two surfaces' normals
+        # so the jaws close along the two surfaces' normals. A wall is thin by the pair's
+        # length, not by which partner it is: a wide vessel's wall has no far partner within
+        # the opening, and its one pair is the near one
         y = _unit(p - q)
-        thin = len(j_far) + np.arange(int(distinct.sum()))
-        y[thin] = _unit(n[has][distinct] - target.normals[j_near[distinct]])
+        thin = np.linalg.norm(p - q, axis=1) < THIN_PAIR * cfg.pair_radius
+        n_q = target.normals[np.concatenate([j_far, j_near[distinct]])]
+        y[thin] = _unit(np.concatenate([n[has], n[has][distinct]])[thin] - n_q[thin])
         mid = (p + q) / 2
         down = -plane.normal
         a0 = down - (y @ down)[:, None] * y
