@@ -95,5 +95,6 @@ def to_local(R: np.ndarray, t: np.ndarray, points: np.ndarray) -> np.ndarray:
     t = np.asarray(t, dtype=np.float32)
     F = len(R)
     rows = R.transpose(0, 2, 1).reshape(3 * F, 3)                   # frame axes as rows
-    local = rows @ np.asarray(points, dtype=np.float32).T - (rows * np.repeat(t, 3, 0)).sum(1)[:, None]
+    offset = (rows * np.repeat(t, 3, axis=0)).sum(axis=1)[:, None]  # each axis's value at t
+    local = rows @ np.asarray(points, dtype=np.float32).T - offset
     return local.reshape(F, 3, -1)

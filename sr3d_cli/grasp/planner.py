@@ -267,17 +267,18 @@ class Planner:
             return np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0)
         j_far, j_near = np.argmax(far, axis=1)[has], np.argmin(near, axis=1)[has]
         distinct = j_near != j_far
-        p = np.concatenate([s[has], s[has][distinct]])
-        q = target.points[np.concatenate([j_far, j_near[distinct]])]
+        i_p = np.concatenate([seeds[has], seeds[has][distinct]])
+        i_q = np.concatenate([j_far, j_near[distinct]])
+        p, q = target.points[i_p], target.points[i_q]
+        span = np.linalg.norm(p - q, axis=1)
         # across the whole object the pair's own line closes the jaws; across a thin wall the
         # pair is too close for its line (up to pair_radius off the normal) to mean anything,
         # so the jaws close along the two surfaces' normals. A wall is thin by the pair's
         # length, not by which partner it is: a wide vessel's wall has no far partner within
         # the opening, and its one pair is the near one
         y = _unit(p - q)
-        thin = np.linalg.norm(p - q, axis=1) < THIN_PAIR * cfg.pair_radius
-        n_q = target.normals[np.concatenate([j_far, j_near[distinct]])]
-        y[thin] = _unit(np.concatenate([n[has], n[has][distinct]])[thin] - n_q[thin])
+        thin = span < THIN_PAIR * cfg.pair_radius
+        y[thin] = _unit(target.normals[i_p[thin]] - target.normals[i_q[thin]])
         mid = (p + q) / 2
         down = -plane.normal
         a0 = down - (y @ down)[:, None] * y
@@ -294,7 +295,7 @@ class Planner:
             up_ok = a @ down > -0.2        # never from below the table
             Rs.append(R[up_ok])
             cs.append(mid[up_ok])
-            spans.append(np.linalg.norm(p - q, axis=1)[up_ok])
+            spans.append(span[up_ok])
         return np.concatenate(Rs), np.concatenate(cs), np.concatenate(spans)
 
     def _y_bins(self, y: np.ndarray, bin_size: float = 0.001):
