@@ -2,15 +2,17 @@
 
 For each object: seed points on its surface, as many on each slice along its length; across each
 seed, along its normal, the farthest point of the same object within the gripper's opening (the
-antipode); the closing direction is the line between them and approach directions are sampled
-around the table normal, perpendicular to it. Each candidate frame is tried at several depths
+antipode), and the nearest too where it differs (across one wall); the closing direction is the
+line between them (across a thin wall or stem, the two normals) and approach directions are
+sampled around the table normal, perpendicular to it. Each candidate frame is tried at several depths
 (deepest first): the object's cross-section between the fingers sets the opening and the centre,
 the fingers and palm must hold no scene point and stay above the table, and the contact normals
 must lie inside the friction cone. Score: friction margin, opening margin, approach from above and
 a grasp centre near half the object's height, weighted (config). Non-maximum suppression, then the
-best K per object; where the object has a placed mesh, those K are scored again with the friction
-their exact contacts on it need (the jaws closed onto its triangles, as the evaluator closes them
-on a true mesh). An object where nothing holds gets other seed points (``redraws``).
+best K per object; where the object has a placed mesh, the best of the first 3K are scored again
+with the friction their exact contacts on it need (the jaws closed onto its triangles, as the
+evaluator closes them on a true mesh). An object where nothing holds (with a placed mesh: whose
+best grasp's exact contacts do not hold) gets other seed points (``redraws``).
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
