@@ -71,6 +71,27 @@ def test_seen_from_steeply_above_a_flask_keeps_its_neck():
     assert upper.min() > 0.7 * neck and upper.max() < 1.4 * neck, upper / neck
 
 
+@pytest.mark.parametrize("elevation, spill", [(48.0, 0), (56.0, 0), (48.0, 1), (40.0, 2)])
+def test_seen_from_above_a_beaker_keeps_a_straight_rim(elevation, spill):
+    # the rim ellipse covers the upper levels; a taller beaker curling in at the top draws
+    # nearly the same outline. ``spill`` rows of a segmentation's overreach above the rim
+    # (8 px wide) must not pull the top up either
+    plane = _table(elevation, 0.6)
+    base = plane.intersect(np.array([0.0, 0.03, 1.0]))
+    r, h = 0.042, 0.07
+    prof = np.array([[0, 0], [r, 0], [r, h - 0.003], [1.06 * r, h], [0, h]])
+    mask = _render(prof, base, plane.normal)
+    for _ in range(spill):
+        ys, xs = np.nonzero(mask)
+        c = int(xs[ys == ys.min()].mean())
+        mask[ys.min() - 1, c - 4:c + 4] = True
+    fit = fit_revolution(mask, K, plane)
+    radii = fit.profile[1:-1, 0] * fit.height
+    assert fit.resting == "standing"
+    assert fit.height == pytest.approx(h, rel=0.04)
+    assert radii[-3:].min() > 0.95 * r, radii[-3:] / r
+
+
 def test_lying_bottle_recovered_with_its_base_at_the_wide_end():
     plane = _table(45.0, 0.55)
     axis = np.array([1.0, 0, 0]) - (np.array([1.0, 0, 0]) @ plane.normal) * plane.normal

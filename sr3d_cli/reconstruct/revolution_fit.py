@@ -31,6 +31,7 @@ from sr3d_cli.geometry.transforms import make_T, rotation_about
 DEPTH_BAND = 0.01  # metres: a raw reading this close to a model's front surface lies on it
 DEPTH_MIN_POINTS = 30  # fewest readings on a surface that count as evidence
 DEPTH_SAMPLES = 400  # readings of a mask weighed against fitted surfaces (evenly spread)
+TOP_SHARE = 0.25  # a straight top's height: where the outline is this share of its widest
 
 
 @dataclass
@@ -97,6 +98,13 @@ class _Frame:
         self.size = size
         self.obs = self.warp(mask[self.y0:y1, self.x0:x1])
 
+    @classmethod
+    def along(cls, model: "_Model", mask: np.ndarray, K: np.ndarray) -> "_Frame":
+        """The window whose vertical is ``model``'s projected axis, centred between its ends."""
+        c0, c1 = project(np.stack([model.base, model.base + model.height * model.axis]), K)
+        up = _unit(c1 - c0) if np.linalg.norm(c1 - c0) > 1e-6 else np.array([0.0, -1.0])
+        return cls(mask, (c0 + c1) / 2, up, pad=8)
+
     def warp(self, window: np.ndarray) -> np.ndarray:
         return cv2.warpAffine(window.astype(np.uint8), self.M, (self.size, self.size),
                               flags=cv2.INTER_NEAREST) > 0
@@ -112,11 +120,14 @@ class _Frame:
         return uv @ self.M[:, :2].T + self.M[:, 2]
 
 
-def _extent(mask: np.ndarray) -> tuple[float, float, float]:
-    """(top row, bottom row, mean column) of a rotated mask."""
-    rows = np.nonzero(mask.any(1))[0]
+def _extent(mask: np.ndarray, top_share: float = 0.0) -> tuple[float, float, float]:
+    """(top row, bottom row, mean column) of a rotated mask; with ``top_share``, the top row
+    is the first one at least that share of the widest row wide."""
+    widths = mask.sum(1)
+    rows = np.nonzero(widths)[0]
+    top = rows[0] if top_share <= 0 else np.nonzero(widths >= top_share * widths.max())[0][0]
     cols = np.nonzero(mask)[1]
-    return float(rows[0]), float(rows[-1]), float(cols.mean())
+    return float(top), float(rows[-1]), float(cols.mean())
 
 
 def _metres(gap_px: float, moved_px: float, eps: float) -> float:
@@ -142,25 +153,26 @@ def _widths(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 
 def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: str,
-         iterations: int, tilt: bool = False) -> tuple[_Model, float]:
+         iterations: int, tilt: bool = False, keep_radii: bool = False) -> tuple[_Model, float]:
     """Refine ``model`` so that its silhouette matches ``mask``; returns (model, IoU). A lying
     model's axis stays parallel to the plane, or with ``tilt`` rests on its hull
-    (:func:`_rest_on_hull`)."""
+    (:func:`_rest_on_hull`). With ``keep_radii`` only the ends and the position move, and the
+    top end is matched where the outline is ``TOP_SHARE`` of its widest (a row or two of
+    segmentation spill above a rim would pull a straight top up)."""
     n = plane.normal
     for it in range(iterations + 1):
-        c0, c1 = project(model.base[None], K)[0], project((model.base + model.height
-                                                           * model.axis)[None], K)[0]
-        up = _unit(c1 - c0) if np.linalg.norm(c1 - c0) > 1e-6 else np.array([0.0, -1.0])
-        frame = _Frame(mask, (c0 + c1) / 2, up, pad=8)
+        frame = _Frame.along(model, mask, K)
         ren = frame.draw(model, K, mask.shape)
         if it == iterations or not ren.any():
             break
         rows = frame.point(project(model.centres(), K))[:, 1]
-        ratio = (_widths(frame.obs, rows) + 0.5) / (_widths(ren, rows) + 0.5)
-        model.radii = np.clip(model.radii * np.clip(ratio, 0.7, 1.4) ** 0.8,
-                              0.002 * model.height, None)
-        t_obs, b_obs, x_obs = _extent(frame.obs)
-        t_ren, b_ren, x_ren = _extent(ren)
+        if not keep_radii:
+            ratio = (_widths(frame.obs, rows) + 0.5) / (_widths(ren, rows) + 0.5)
+            model.radii = np.clip(model.radii * np.clip(ratio, 0.7, 1.4) ** 0.8,
+                                  0.002 * model.height, None)
+        share = TOP_SHARE if keep_radii else 0.0
+        t_obs, b_obs, x_obs = _extent(frame.obs, share)
+        t_ren, b_ren, x_ren = _extent(ren, share)
         eps = 0.005
         # pixels moved in the window per metre of each parameter (finite differences)
         def shift(delta_base=np.zeros(3), delta_top=np.zeros(3)):
@@ -211,17 +223,38 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             else:  # the axis rests at the largest radius above the plane
                 lift = model.radii.max() - plane.height(model.base[None])[0]
                 model.base = model.base + lift * n
-    if ren.any():
-        # a level whose own width falls short of the drawn width on its row (2 px) is hidden
-        centres = model.centres()
-        drawn = _widths(ren, frame.point(project(centres, K))[:, 1])
-        hidden = 2 * model.radii * K[0, 0] / centres[:, 2] < drawn - 2
+    if ren.any() and not keep_radii:
+        hidden = _hidden(model, frame, ren, K)
         if hidden.any():
             model.radii = _fill_hidden(model.radii, hidden)
             ren = frame.draw(model, K, mask.shape)
     inter = (frame.obs & ren).sum()
     union = (frame.obs | ren).sum()
     return model, float(inter / union) if union else 0.0
+
+
+def _hidden(model: _Model, frame: _Frame, ren: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """(L,) bool: levels whose own width falls short of the drawn width on their row (by 2 px):
+    another part of the model covers them there."""
+    centres = model.centres()
+    drawn = _widths(ren, frame.point(project(centres, K))[:, 1])
+    return 2 * model.radii * K[0, 0] / centres[:, 2] < drawn - 2
+
+
+def _straight_top(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane,
+                  iterations: int) -> tuple[_Model, float] | None:
+    """The standing ``model`` with its top levels above the highest level the silhouette shows
+    widened to that level's radius, its height refitted; None if the top level shows."""
+    frame = _Frame.along(model, mask, K)
+    hidden = _hidden(model, frame, frame.draw(model, K, mask.shape), K)
+    shown = np.nonzero(~hidden)[0]
+    if not hidden[-1] or len(shown) == 0:
+        return None
+    top = shown[-1]
+    radii = model.radii.copy()
+    radii[top + 1:] = np.maximum(radii[top + 1:], radii[top])
+    start = _Model(model.base.copy(), model.axis.copy(), model.height, radii)
+    return _fit(start, mask, K, plane, "standing", iterations, keep_radii=True)
 
 
 def _fill_hidden(radii: np.ndarray, hidden: np.ndarray) -> np.ndarray:
@@ -451,7 +484,8 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
                    depth_band: float = DEPTH_BAND, depth_min_points: int = DEPTH_MIN_POINTS,
                    depth_vote: float = 2.0, vote_iou_gap: float = 0.06,
                    axial_view: float = 25.0, axial_iou_gap: float = 0.03,
-                   refute_share: float = 0.25, tilt_tolerance: float = 0.01) -> RevolutionFit:
+                   refute_share: float = 0.25, tilt_tolerance: float = 0.01,
+                   straight_top_gap: float = 0.002) -> RevolutionFit:
     """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
 
     Standing and lying are both fitted; the better silhouette wins, lying only by
@@ -472,6 +506,12 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     Standing and lying are weighed with the lying axis parallel to the table; a lying winner is
     then fitted again resting on its hull, tilted (:func:`_resting_tilt`), and that fit is kept
     if its IoU is within ``tilt_tolerance`` of the flat one's.
+    Seen from above, an open vessel's rim ellipse covers its upper levels, and the outline fits
+    a taller vessel curling inward at the top about as well as the true straight one (a 7 cm
+    beaker looked down on from 56 degrees above the table came out 30% too tall). A standing
+    fit whose top levels are hidden is refitted with them as wide as the highest level shown
+    (:func:`_straight_top`); that fit is kept if its IoU is within ``straight_top_gap`` of
+    the free one's.
 
     Raises ValueError when neither hypothesis can be set up (e.g. the mask is above the horizon).
     """
@@ -492,6 +532,10 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         if model is None:
             continue
         model, iou = _fit(model, mask, K, plane, resting, iterations)
+        if resting == "standing":
+            straight = _straight_top(model, mask, K, plane, iterations)
+            if straight is not None and straight[1] >= iou - straight_top_gap:
+                model, iou = straight
         fit, count = _result(model, resting, iou), None
         if axial and resting == "standing":
             # the readings' fit replaces the outline's if more readings lie on its surface
