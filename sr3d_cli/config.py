@@ -68,6 +68,7 @@ class ReconstructConfig:
     use_depth: bool = True
     depth_vote: float = 2.0
     axial_view: float = 25.0
+    smooth: float = 1.0
     open_top_ratio: float = 0.7
     open_wall: float = 0.0025
     open_base: float = 0.008

@@ -20,7 +20,8 @@ from sr3d_cli.geometry.revolution import open_vessel, profile_from_mesh, revolve
 from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_border, check_mask
-from sr3d_cli.reconstruct.revolution_fit import _resting_tilt, axial_view_angle, fit_revolution
+from sr3d_cli.reconstruct.revolution_fit import (_resting_tilt, axial_view_angle, fit_revolution,
+                                                 smoothed)
 from tests import onnx_builders
 
 K = np.array([[600.0, 0, 319.5], [0, 600, 239.5], [0, 0, 1]])
@@ -90,6 +91,21 @@ def test_seen_from_above_a_beaker_keeps_a_straight_rim(elevation, spill):
     assert fit.resting == "standing"
     assert fit.height == pytest.approx(h, rel=0.04)
     assert radii[-3:].min() > 0.95 * r, radii[-3:] / r
+
+
+@pytest.mark.parametrize("elevation", [40.0, 56.0, 70.0])
+def test_a_straight_wall_is_written_straight(elevation):
+    # each level's width is read on one image row in whole pixels: unsmoothed, neighbouring
+    # radii zigzag and a cylinder's wall slopes up to 48 degrees level to level
+    plane = _table(elevation, 0.6)
+    base = plane.intersect(np.array([0.0, 0.03, 1.0]))
+    r, h = 0.03, 0.12
+    prof = np.array([[0, 0], [r, 0], [r, h], [0, h]])
+    fit = smoothed(fit_revolution(_render(prof, base, plane.normal), K, plane),
+                   ReconstructConfig().smooth)
+    radii, z = fit.profile[3:-3, 0] * fit.height, fit.profile[3:-3, 1] * fit.height
+    slope = np.degrees(np.arctan2(np.abs(np.diff(radii)), np.diff(z)))
+    assert np.percentile(slope, 90) < 6.0 and slope.max() < 35.0, slope.round(1)
 
 
 def test_lying_bottle_recovered_with_its_base_at_the_wide_end():

@@ -18,6 +18,7 @@ from sr3d_cli.geometry.camera import project
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, RevolutionFit, fit_revolution,
+                                                 smoothed,
                                                  off_table_readings, raw_support)
 
 BASE_SHARE = 0.15  # of the height: the profile's lowest part, whose widest ring is the base
@@ -194,6 +195,7 @@ class Reconstructor:
             name, mesh = self.library.pick(label, fit.profile)
             meta["library_mesh"] = name
             return Reconstruction(mesh, meta)
+        fit = smoothed(fit, cfg.smooth)
         mouth = open_mouth(fit, cfg, mask, K, plane, depth)
         if mouth is not None:
             meta["open_top"] = True
