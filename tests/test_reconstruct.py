@@ -209,6 +209,20 @@ def test_raw_depth_tells_a_standing_bottle_from_a_lying_one_seen_from_above(x):
     assert fit_revolution(mask, K, plane, depth=see_through).resting == "lying"
 
 
+def test_readings_above_a_straight_top_keep_the_domed_one():
+    # a jar with a domed lid seen from 64 degrees: the outline fits a shorter straight top
+    # better; the readings on the dome rise above it and rule it out
+    r, h = 0.045, 0.08
+    t = np.linspace(0, np.pi / 2, 8)[:-1]
+    dome = np.column_stack([r * np.cos(t), 0.45 * h + 0.55 * h * np.sin(t)])
+    prof = np.vstack([[0, 0], [r, 0], dome, [0.004, h], [0, h]])
+    plane, mask, depth, _, _ = _frame_from_above(prof, 64.0, 0.0, 0.1)
+    outline = fit_revolution(mask, K, plane, allow_lying=False)
+    assert outline.height < 0.8 * h  # straight, too short
+    fit = fit_revolution(mask, K, plane, depth=depth, allow_lying=False, axial_view=0.0)
+    assert fit.height > 0.9 * h
+
+
 def test_readings_high_above_a_lying_fit_make_a_goblet_stand():
     """Seen steeply from above, a tall goblet draws the outline of a short lying one. With 1 cm
     of noise on the glass, few readings lie within the surface band of either fit and the vote

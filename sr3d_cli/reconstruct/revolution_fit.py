@@ -526,7 +526,8 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     beaker looked down on from 56 degrees above the table came out 30% too tall). A standing
     fit whose top levels are hidden is refitted with them as wide as the highest level shown
     (:func:`_straight_top`); that fit is kept if its IoU is within ``straight_top_gap`` of
-    the free one's.
+    the free one's and the readings do not refute it (a squat box with a lid, not a solid of
+    revolution, came out 2.3 cm tall under readings up to 8 cm).
 
     Raises ValueError when neither hypothesis can be set up (e.g. the mask is above the horizon).
     """
@@ -539,6 +540,13 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     def on_surface(fit: RevolutionFit) -> int:
         return raw_support(fit, xs, ys, raw, K, mask.shape, depth_band)
 
+    def refuted(fit: RevolutionFit) -> bool:
+        """Enough readings lie above the fit's highest point to rule it out."""
+        if readings is None:
+            return False
+        above = int((plane.height(readings) > top_height(fit, plane) + depth_band).sum())
+        return above >= max(depth_min_points, refute_share * len(readings))
+
     fits = []  # (score, fit, readings on its surface when already counted)
     for resting, init in (("standing", _init_standing), ("lying", _init_lying)):
         if resting == "lying" and not allow_lying:
@@ -547,11 +555,13 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         if model is None:
             continue
         model, iou = _fit(model, mask, K, plane, resting, iterations)
+        fit, count = _result(model, resting, iou), None
         if resting == "standing":
             straight = _straight_top(model, mask, K, plane, iterations)
             if straight is not None and straight[1] >= iou - straight_top_gap:
-                model, iou = straight
-        fit, count = _result(model, resting, iou), None
+                candidate = _result(straight[0], resting, straight[1])
+                if not refuted(candidate):
+                    fit = candidate
         if axial and resting == "standing":
             # the readings' fit replaces the outline's if more readings lie on its surface
             # (off the axis, a flask's neck shifts against its body and the outline fit wins)
@@ -568,10 +578,7 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         support = [on_surface(f) if count is None else count for _, f, count in fits]
         lo, hi = sorted(support)
         close = abs(fits[0][1].iou - fits[1][1].iou) <= vote_iou_gap
-        heights = plane.height(readings)
-        above = [int((heights > top_height(f, plane) + depth_band).sum()) for _, f, _ in fits]
-        refuted = [a >= max(depth_min_points, refute_share * len(heights)) for a in above]
-        if refuted[1] and not refuted[0]:  # fits: standing, then lying
+        if refuted(fits[1][1]) and not refuted(fits[0][1]):  # fits: standing, then lying
             best = fits[0][1]  # readings high above a lying fit: it stands
         elif close and hi >= depth_min_points and hi >= depth_vote * lo:
             best = fits[int(np.argmax(support))][1]
