@@ -165,8 +165,8 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         ren = frame.draw(model, K, mask.shape)
         if it == iterations or not ren.any():
             break
-        rows = frame.point(project(model.centres(), K))[:, 1]
         if not keep_radii:
+            rows = frame.point(project(model.centres(), K))[:, 1]
             ratio = (_widths(frame.obs, rows) + 0.5) / (_widths(ren, rows) + 0.5)
             model.radii = np.clip(model.radii * np.clip(ratio, 0.7, 1.4) ** 0.8,
                                   0.002 * model.height, None)
