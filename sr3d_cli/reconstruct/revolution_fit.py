@@ -535,6 +535,7 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     if depth is not None:
         xs, ys, raw = off_table_readings(mask, depth, K, plane, depth_band)
         readings = unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K)
+        heights = plane.height(readings)
     axial = readings is not None and axial_view_angle(mask, K, plane) < axial_view
 
     def on_surface(fit: RevolutionFit) -> int:
@@ -544,7 +545,7 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         """Enough readings lie above the fit's highest point to rule it out."""
         if readings is None:
             return False
-        above = int((plane.height(readings) > top_height(fit, plane) + depth_band).sum())
+        above = int((heights > top_height(fit, plane) + depth_band).sum())
         return above >= max(depth_min_points, refute_share * len(readings))
 
     fits = []  # (score, fit, readings on its surface when already counted)
