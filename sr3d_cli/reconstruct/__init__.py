@@ -116,42 +116,44 @@ def configured_fit(mask: np.ndarray, K: np.ndarray, plane: Plane, cfg: Reconstru
     return fit_revolution(mask, K, plane, levels=cfg.levels, iterations=cfg.iterations,
                           lying_margin=cfg.lying_margin,
                           depth=depth if cfg.use_depth else None, depth_vote=cfg.depth_vote,
-                          axial_view=cfg.axial_view)
+                          axial_view=cfg.axial_view, openings=lambda fit: mouths(fit, cfg))
+
+
+def mouths(fit: RevolutionFit, cfg: ReconstructConfig) -> list[RevolutionFit]:
+    """The fit opened at each end that can be a mouth (at least ``open_top_ratio`` of the
+    widest radius): a wall and a floor inside instead of a lid, the mouth at the top of the
+    object frame. Standing, only the top can be; lying, either end (the base end first: a lying
+    fit's base is its wider end)."""
+    if cfg.open_top_ratio <= 0:
+        return []
+    r = fit.profile[1:-1, 0]
+    ends = [(fit, r[-1])] if fit.resting == "standing" else \
+        [(fit.flipped(), r[0]), (fit, r[-1])]
+    return [replace(f, profile=open_vessel(f.profile[:-1], cfg.open_wall / f.height,
+                                           cfg.open_base / f.height))
+            for f, end in ends if end >= cfg.open_top_ratio * r.max()]
 
 
 def open_mouth(fit: RevolutionFit, cfg: ReconstructConfig, mask: np.ndarray, K: np.ndarray,
                plane: Plane, depth: np.ndarray | None) -> RevolutionFit | None:
-    """The fit as an open vessel (drinking glass, beaker, goblet), its mouth at the top of the
-    object frame with a wall and a floor inside, so the depth inside it is rendered rather than
-    a lid; None for a closed solid. A mouth is an end at least ``open_top_ratio`` of the widest
-    radius. Standing, the top is the mouth. Lying, either end may be (the wider first); an end
-    is taken open only when the raw ``depth`` says so: of the off-table readings that miss the
-    closed model's front surface, the open one takes in ``open_explains`` (and at least 5% of
-    all), as when the camera sees into the mouth. A mouth turned away changes nothing the
-    camera sees, and the model stays closed. ``depth`` is used when ``use_depth`` is on."""
-    if cfg.open_top_ratio <= 0:
-        return None
-    r = fit.profile[1:-1, 0]
-
-    def opened(f: RevolutionFit) -> RevolutionFit:
-        return replace(f, profile=open_vessel(f.profile[:-1], cfg.open_wall / f.height,
-                                              cfg.open_base / f.height))
-
-    def is_mouth(end: float) -> bool:
-        return end >= cfg.open_top_ratio * r.max()
-
+    """The fit as an open vessel (drinking glass, beaker, goblet; see :func:`mouths`), so the
+    depth inside it is rendered rather than a lid; None for a closed solid. Standing, the top
+    is the mouth when wide enough. Lying, an end is taken open only when the raw ``depth`` says
+    so: of the off-table readings that miss the closed model's front surface, the open one
+    takes in ``open_explains`` (and at least 5% of all), as when the camera sees into the
+    mouth. A mouth turned away changes nothing the camera sees, and the model stays closed.
+    ``depth`` is used when ``use_depth`` is on."""
+    opened = mouths(fit, cfg)
     if fit.resting == "standing":
-        return opened(fit) if is_mouth(r[-1]) else None
-    # the base end first: a lying fit's base is its wider end
-    mouths = [opened(f) for f, end in ((fit.flipped(), r[0]), (fit, r[-1])) if is_mouth(end)]
-    if not mouths or depth is None or not cfg.use_depth:
+        return opened[0] if opened else None
+    if not opened or depth is None or not cfg.use_depth:
         return None
     xs, ys, raw = off_table_readings(mask, depth, K, plane)
     closed, *counts = [raw_support(f, xs, ys, raw, K, mask.shape, DEPTH_BAND)
-                       for f in [fit] + mouths]
+                       for f in [fit] + opened]
     best = int(np.argmax(counts))
     gained = counts[best] - closed
-    return mouths[best] if gained >= max(cfg.open_explains * (len(xs) - closed),
+    return opened[best] if gained >= max(cfg.open_explains * (len(xs) - closed),
                                          0.05 * len(xs), 1) else None
 
 
