@@ -481,7 +481,8 @@ def test_an_open_beaker_looked_into_stands_by_the_readings_inside_it(tmp_path):
     where it was found): its outline fits a short lying solid about as well as the standing one,
     so the raw readings vote. Most of them lie inside the beaker, on its floor and inner wall,
     which only the open standing model has: counted on the lidded one, the lying fit took 70 of
-    them against 29, and the beaker was laid down (a 42 mm depth error over it)."""
+    them against 29, and the beaker was laid down (a 42 mm depth error over it). A change to
+    the generator redraws the scene: find such a beaker again on the breakdown's study set."""
     from sr3d_cli.config import PlaneConfig, SynthConfig
     from sr3d_cli.render import make_renderer
     from sr3d_cli.segment import support_plane
