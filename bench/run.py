@@ -214,31 +214,39 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
             "repaired": _over_draws(by_draw), "raw": overall(raw_frames)}
 
 
+def _repair(pipeline: Pipeline, frame) -> np.ndarray:
+    """Run the frame's missing stages and write its repaired depth; returns it, (H, W) m."""
+    from sr3d_cli.io.images import write_depth
+
+    pipeline.ensure_upstream(frame)
+    depth, _ = pipeline.repaired_depth(frame)
+    write_depth(frame.scene.output_path("repaired", frame.frame_id), depth,
+                frame.camera.depth_scale)
+    return depth
+
+
+def _object_metrics(source, fid: str, depth: np.ndarray) -> dict:
+    """Depth metrics of ``depth`` over the frame's true object masks."""
+    gt = source.load_gt_depth(fid, depth.shape)
+    return depth_metrics(depth, gt, source.load_mask(source.gt_mask_path(fid), depth.shape) > 0)
+
+
 def heldout_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict:
     """The whole default pipeline (segment -> reconstruct -> align -> repair -> grasp) on a
     generated set of seed :data:`HELD_OUT_SEED`. The seed-700 set is where sr3d's parameters
     were tuned, so its numbers flatter; seed 900 is where failures are looked into; this set's
     frames are not to be looked at one by one, so its totals stay the ones to expect on new
     frames (once a change is chosen by them, pick a new seed)."""
-    from sr3d_cli.io.images import write_depth
-
     folder = work / f"heldout{HELD_OUT_SEED}"
     generated_set(folder, frames, SynthConfig(seed=HELD_OUT_SEED, views=1), renderer)
     out = work / f"heldout{HELD_OUT_SEED}_out"
     shutil.rmtree(out, ignore_errors=True)
-    planners = _planners(cfg)
+    planners, pipeline = _planners(cfg), Pipeline(cfg)
     by_draw: list[list[dict]] = [[] for _ in planners]
     rows = []
     for source in discover_scenes(folder, IOConfig(), out):
         fid = "000000"
-        frame = source.load_frame(fid)
-        pipeline = Pipeline(cfg)
-        pipeline.ensure_upstream(frame)
-        depth, _ = pipeline.repaired_depth(frame)
-        write_depth(source.output_path("repaired", fid), depth, frame.camera.depth_scale)
-        gt = source.load_gt_depth(fid, depth.shape)
-        rows.append(depth_metrics(depth, gt, source.load_mask(source.gt_mask_path(fid),
-                                                             depth.shape) > 0))
+        rows.append(_object_metrics(source, fid, _repair(pipeline, source.load_frame(fid))))
         _plan_draws(source, fid, planners, by_draw, cfg)
         # progress only: this set's frames are not to be read one by one
         print("held-out", source.name, "done", file=sys.stderr)
@@ -252,14 +260,14 @@ BREAKDOWN_DRAWS = 4  # grasp draws per condition (8 would double the section's ~
 CONDITIONS = ("true geometry", "true masks", "sr3d")
 
 
-def _write_truth(source, fid: str, cfg: Config, geometry: bool) -> np.ndarray | None:
+def _write_truth(frame, cfg: Config, geometry: bool) -> np.ndarray | None:
     """A frame's ground truth written as its stage outputs: the true instance masks and, with
     ``geometry``, the true meshes at their true poses (on the table fitted to the raw depth, as
     align fits it) and the true depth as the repaired one, which is returned."""
     from sr3d_cli.io.atomic import write_json, write_png
     from sr3d_cli.io.images import write_depth
 
-    frame = source.load_frame(fid)
+    source, fid = frame.scene, frame.frame_id
     ids = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
     objects = source.load_gt_objects(fid)["objects"]
     write_png(source.output_path("masks", fid), ids.astype(np.uint16))
@@ -289,11 +297,9 @@ def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict
     out), and on the whole pipeline; judged as in :func:`grasp_bench`, over
     :data:`BREAKDOWN_DRAWS` draws. Not part of a plain ``make bench``: ``bench/run.py
     breakdown``."""
-    from sr3d_cli.io.images import write_depth
-
     folder = work / f"study{BREAKDOWN_SEED}"
     generated_set(folder, frames, SynthConfig(seed=BREAKDOWN_SEED, views=1), renderer)
-    planners = _planners(cfg)[:BREAKDOWN_DRAWS]
+    planners, pipeline = _planners(cfg)[:BREAKDOWN_DRAWS], Pipeline(cfg)
     conditions = {}
     for condition in CONDITIONS:
         out = work / f"study{BREAKDOWN_SEED}_{condition.replace(' ', '_')}"
@@ -303,19 +309,13 @@ def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict
         for source in discover_scenes(folder, IOConfig(), out):
             fid = "000000"
             frame = source.load_frame(fid)
-            depth = _write_truth(source, fid, cfg, geometry=True) \
-                if condition == "true geometry" else None
-            if depth is None:
+            if condition == "true geometry":
+                depth = _write_truth(frame, cfg, geometry=True)
+            else:
                 if condition == "true masks":
-                    _write_truth(source, fid, cfg, geometry=False)
-                pipeline = Pipeline(cfg)
-                pipeline.ensure_upstream(frame)
-                depth, _ = pipeline.repaired_depth(frame)
-                write_depth(source.output_path("repaired", fid), depth,
-                            frame.camera.depth_scale)
-            gt = source.load_gt_depth(fid, depth.shape)
-            rows.append(depth_metrics(depth, gt, source.load_mask(source.gt_mask_path(fid),
-                                                                 depth.shape) > 0))
+                    _write_truth(frame, cfg, geometry=False)
+                depth = _repair(pipeline, frame)
+            rows.append(_object_metrics(source, fid, depth))
             _plan_draws(source, fid, planners, by_draw, cfg)
             print("breakdown", condition, source.name,
                   f"top1/0 {by_draw[0][-1]['top1_success']:.2f}", file=sys.stderr)
@@ -528,12 +528,13 @@ def main(frames: int = 24, sections: tuple[str, ...] = SECTIONS) -> None:
 def _breakdown_report(breakdown: dict) -> list[str]:
     if not breakdown:
         return []
+    draws = len(next(iter(breakdown["conditions"].values()))["grasp"]["top1_by_draw"])
     lines = [f"## where grasps are lost (study seed {breakdown['seed']}, `bench/run.py "
              "breakdown`)", "",
              f"{breakdown['frames']} generated frames; the same planner on the true meshes at "
              "their true poses with the true depth, on sr3d's reconstruction and placement "
              "from the true masks, and on the whole pipeline; judged as above, mean of "
-             f"{BREAKDOWN_DRAWS} draws. Depth over the true object masks.", "",
+             f"{draws} draws. Depth over the true object masks.", "",
              "| grasps planned on | objects | REL | MAE mm | top-1 | top-10 |",
              "|---|---|---|---|---|---|"]
     for name, c in breakdown["conditions"].items():
