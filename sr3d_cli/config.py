@@ -136,6 +136,7 @@ class GraspConfig:
     seed_bins: int = 12
     seed: int = 0
     redraws: int = 2
+    height_tolerance: float = 0.004
     approaches: int = 7
     pair_radius: float = 0.004
     contact_band: float = 0.002

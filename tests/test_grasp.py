@@ -365,3 +365,31 @@ def test_the_placed_mesh_rescores_the_best_grasps_by_their_exact_contacts():
             if surfaces is not None:
                 assert max(mus) <= 0.3, name
         assert best[True] <= {"goblet": 0.85, "wine glass": 0.9}[name] * best[False], (name, best)
+
+
+def test_the_best_grasps_hold_on_a_model_whose_height_is_a_few_millimetres_off():
+    """A 10 cm wide beaker with a lip (too wide for the gripper: held only by its rim) fitted
+    4% too tall or too short, as sr3d's fits often are: planned on the model, judged on the
+    true beaker. Scored at the model's exact height, the best rim pinch often rests a pad on
+    the lip, where the true one is not; with the contacts also found 4 mm up and down, the best
+    holds. Measured over 10 seeds each: held at friction 0.5 by .3 (too tall) and .7 (too
+    short) of the best grasps without the margin, .9 and .9 with it."""
+    profile = np.asarray(open_vessel([(0, 0), (0.047, 0), (0.049, 0.003), (0.049, 0.126),
+                                      (0.052, 0.129)], 0.0025, 0.0047))
+    truth = _truth([_on_table(revolve(profile, 64))])
+    held = {}
+    for tolerance in (0.0, 0.004):
+        held[tolerance] = []
+        for stretch in (1.04, 0.96):
+            model = _on_table(revolve(profile * [1.0, stretch], 64))
+            target = mesh_cloud(model, np.eye(4), 1.0, 1, 2400)
+            scene = Cloud.concat([_table_cloud(), target])
+            for seed in range(10):
+                cfg = Config().grasp
+                cfg.seed, cfg.height_tolerance = seed, tolerance
+                grasps, _ = Planner(cfg).plan(scene, {1: target}, PLANE,
+                                              {1: np.asarray(model.triangles)})
+                record = judge(grasps.sorted().take(slice(0, 1)), truth, GRIPPER)[0]
+                held[tolerance].append(record["reason"] == "ok" and record["mu"] <= 0.5)
+    assert np.mean(held[0.004]) >= 0.85, held
+    assert np.mean(held[0.004]) >= np.mean(held[0.0]) + 0.25, held

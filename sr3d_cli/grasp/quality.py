@@ -98,31 +98,43 @@ def _contact(origins: np.ndarray, direction: np.ndarray, ids: list[int],
 
 
 def close_jaws(R: np.ndarray, t: np.ndarray, width: float, depth: float, ids: list[int],
-               triangles: list[np.ndarray], gripper: Gripper) -> tuple[str, int | None, float]:
+               triangles: list[np.ndarray], gripper: Gripper, shifts: np.ndarray | None = None,
+               enough: float = math.inf) -> tuple[str, int | None, float]:
     """Close both fingers of one grasp (rotation ``R``, centre ``t``, opening ``width``,
     ``depth``) onto the meshes (``triangles`` per object of ``ids``): (reason "ok", "no
     contact" or "two objects"; the object touched; the smallest friction coefficient giving
-    force closure, inf unless "ok")."""
+    force closure, inf unless "ok"). ``shifts (s, 3)``: the grasp is also closed moved by each
+    (camera frame), and the worst outcome counts (the planner's margin for a model's height
+    error); it stops at the first needing more than ``enough``."""
+    moves = np.zeros((1, 3)) if shifts is None else np.vstack([np.zeros(3), shifts])
+    local_moves = moves @ R
     # a finger's rays sweep only the box between the open pads: triangles outside it cannot
     # be hit (the test is exact, only fewer triangles are cast against)
     eps = 1e-6
-    lo = np.array([depth - gripper.finger_length, -width / 2, -gripper.finger_height / 2]) - eps
-    hi = np.array([depth, width / 2, gripper.finger_height / 2]) + eps
+    lo = np.array([depth - gripper.finger_length, -width / 2, -gripper.finger_height / 2]) \
+        + local_moves.min(axis=0) - eps
+    hi = np.array([depth, width / 2, gripper.finger_height / 2]) + local_moves.max(axis=0) + eps
     near = []
     for tri in triangles:
         local = (tri - t) @ R
         near.append(tri[np.all(local.max(axis=1) >= lo, axis=1)
                         & np.all(local.min(axis=1) <= hi, axis=1)])
-    contacts = [_contact(origins @ R.T + t, direction, ids, near, width)
-                for origins, direction in zip(_pad_rays(gripper, width, depth),
-                                              (R[:, 1], -R[:, 1]))]
-    if any(c is None for c in contacts):
-        return "no contact", None, math.inf
-    if contacts[0][0] != contacts[1][0]:
-        return "two objects", None, math.inf
-    (k, p_l, n_l), (_, p_r, n_r) = contacts
-    angle = closure_angle(p_l, n_l, p_r, n_r)
-    return "ok", k, math.tan(min(angle, math.radians(89.99)))
+    worst: tuple[str, int | None, float] = ("ok", None, -1.0)
+    for move in moves:
+        contacts = [_contact(origins @ R.T + t + move, direction, ids, near, width)
+                    for origins, direction in zip(_pad_rays(gripper, width, depth),
+                                                  (R[:, 1], -R[:, 1]))]
+        if any(c is None for c in contacts):
+            return "no contact", None, math.inf
+        if contacts[0][0] != contacts[1][0]:
+            return "two objects", None, math.inf
+        (k, p_l, n_l), (_, p_r, n_r) = contacts
+        mu = math.tan(min(closure_angle(p_l, n_l, p_r, n_r), math.radians(89.99)))
+        if mu > worst[2]:
+            worst = ("ok", k, mu)
+        if mu > enough:
+            break
+    return worst
 
 
 def closure_angle(p_l, n_l, p_r, n_r) -> float:
