@@ -218,8 +218,8 @@ class Planner:
         shoulder, a pad on a beaker's lip) fails on the true object (study seed 1500, sr3d's
         fits from the true masks, 4 draws: top-1 .782 -> .824). Best first, until the best is
         one scored so (each costs up to three ray casts; most objects need one to three). A
-        contact needing more than :data:`EXACT_MU_CAP` (or none) counts as that. Returns the grasps, sorted, and the friction the best one's exact
-        contacts need."""
+        contact needing more than :data:`EXACT_MU_CAP` (or none) counts as that. Returns the
+        grasps, sorted, and the friction the best one's exact contacts need."""
         from sr3d_cli.grasp.quality import close_jaws
 
         tol = self.cfg.height_tolerance
