@@ -489,6 +489,14 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
         base = base + np.clip(step, -0.5 * widest, 0.5 * widest) @ np.stack([e1, e2])
     inter = (sil & mask).sum()
     iou = float(inter / ((sil | mask).sum() or 1))
+    # the readings' top lies above the rim by about twice their noise (glass readings scatter
+    # a few mm along the ray); the outline, with the readings' shape and size kept, places
+    # the ends. Looked straight down, the outline hardly moves with the height: the refit is
+    # kept only within ``band`` of the readings' height.
+    model = _Model(base.copy(), n.copy(), height, radii.copy())
+    model, refit_iou = _fit(model, mask, K, plane, "standing", iterations, keep_radii=True)
+    if abs(model.height - height) <= band:
+        return _result(model, "standing", refit_iou)
     profile = np.vstack([[0.0, 0.0], np.column_stack([radii / height, zk / height]),
                          [0.0, 1.0]])
     return RevolutionFit(profile, base, n.copy(), height, "standing", iou)
