@@ -449,8 +449,9 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
     The height is a high percentile of the readings' heights above the table and the profile
     their upper envelope (:func:`_envelope`), scaled to the widest radius; that radius and the
     axis's place on the table are then moved until the silhouette's area and centroid match
-    the mask's (the readings give the shape, the outline the size). None with fewer than
-    ``min_points`` readings more than ``band`` above the table."""
+    the mask's (the readings give the shape, the outline the size), and the outline places the
+    ends (:func:`_fit` keeping the radii) within ``band`` of that height. None with fewer
+    than ``min_points`` readings more than ``band`` above the table."""
     n = plane.normal
     above = plane.height(points)
     points, above = points[above > band], above[above > band]
@@ -490,9 +491,8 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
     inter = (sil & mask).sum()
     iou = float(inter / ((sil | mask).sum() or 1))
     # the readings' top lies above the rim by about twice their noise (glass readings scatter
-    # a few mm along the ray); the outline, with the readings' shape and size kept, places
-    # the ends. Looked straight down, the outline hardly moves with the height: the refit is
-    # kept only within ``band`` of the readings' height.
+    # a few mm along the ray). Looked straight down, the outline hardly moves with the
+    # height: its ends are kept only within ``band`` of the readings' height.
     model = _Model(base.copy(), n.copy(), height, radii.copy())
     model, refit_iou = _fit(model, mask, K, plane, "standing", iterations, keep_radii=True)
     if abs(model.height - height) <= band:
