@@ -68,6 +68,9 @@ def frame_plane(frame: Frame, ids: np.ndarray, plane_cfg) -> tuple[Plane | None,
         return None, str(exc)
 
 
+OPEN_SUFFIX = "_open.ply"  # meshes/<frame>/<k>_open.ply: the object with an unseen end open
+
+
 def mesh_path(source: SceneSource, frame_id: str, obj_id: int, suffix: str = ".ply"):
     return source.out / "meshes" / frame_id / f"{obj_id}{suffix}"
 
@@ -113,7 +116,11 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
             messages.append(f"object {k}: {exc}")
             continue
         write_mesh(mesh_path(source, fid, k), result.mesh)
-        write_json(mesh_path(source, fid, k, ".json"), result.meta)
+        meta = result.meta
+        if result.open_alternative is not None:
+            write_mesh(mesh_path(source, fid, k, OPEN_SUFFIX), result.open_alternative)
+            meta = {**meta, "open_alternative": mesh_path(source, fid, k, OPEN_SUFFIX).name}
+        write_json(mesh_path(source, fid, k, ".json"), meta)
         written += 1
     return written, messages
 
@@ -124,6 +131,16 @@ def load_mesh(path) -> trimesh.Trimesh:
     except Exception as exc:
         raise ValueError(f"cannot read mesh {path} ({exc})") from None
     return mesh
+
+
+def _open_alternative(path) -> trimesh.Trimesh | None:
+    """The object opened at an end the camera cannot see (``open_alternative`` in
+    meshes/<frame>/<k>.json, in the mesh's own object frame), if reconstruct wrote one."""
+    try:
+        meta = json.loads(path.with_suffix(".json").read_text(encoding="utf-8"))
+        return load_mesh(path.with_name(meta["open_alternative"]))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def _pose_hint(path) -> tuple[np.ndarray, float] | None:
@@ -221,20 +238,27 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
                 raise ValueError(why)
         scene = depth_cloud(depth, K, ids, cfg.stride)
         targets = {int(k): scene.select(scene.labels == k) for k in np.unique(ids) if k > 0}
-        surfaces = {}
+        surfaces, fallbacks = {}, {}
         if depth_source == "repaired":
-            placed = []
+            placed, opened = {}, {}
             for obj in poses.get("objects", []):
                 k = int(obj["id"])
-                mesh = load_mesh(find_mesh(source, fid, k))
+                path = find_mesh(source, fid, k)
                 T, scale = np.asarray(obj["T_cam_obj"]), float(obj["scale"])
-                placed.append(mesh_cloud(mesh, T, scale, k, cfg.mesh_points, seed=k))
-                targets[k] = in_view(placed[-1], K, depth.shape)
-                surfaces[k] = place_points(mesh.vertices, T, scale)[mesh.faces]
-            scene = Cloud.concat([scene] + placed)
+                for mesh, clouds in ((load_mesh(path), placed), (_open_alternative(path), opened)):
+                    if mesh is not None:
+                        clouds[k] = (mesh_cloud(mesh, T, scale, k, cfg.mesh_points, seed=k),
+                                     place_points(mesh.vertices, T, scale)[mesh.faces])
+                targets[k], surfaces[k] = in_view(placed[k][0], K, depth.shape), placed[k][1]
+            # where the closed model gives no grasp: the same scene with the object opened
+            for k, (cloud, triangles) in opened.items():
+                others = [c for j, (c, _) in placed.items() if j != k]
+                fallbacks[k] = (Cloud.concat([scene] + others + [cloud]),
+                                in_view(cloud, K, depth.shape), triangles)
+            scene = Cloud.concat([scene] + [c for c, _ in placed.values()])
         if only is not None:
             targets = {only: targets[only]}
-        grasps, messages = planner.plan(scene, targets, plane, surfaces)
+        grasps, messages = planner.plan(scene, targets, plane, surfaces, fallbacks)
     except (InputError, ValueError) as exc:
         messages.append(str(exc))
     document = {"source": depth_source, "grasps": grasps.to_json(), "failed": messages,

@@ -327,15 +327,28 @@ def test_a_lying_beaker_is_opened_where_the_camera_sees_into_it():
                                                                     depth)
         assert rec.meta["resting"] == "lying"
         assert rec.meta.get("open_top", False) == (share == 0.5)
+        if share == 0.5:
+            assert rec.open_alternative is None  # the end seen open is the mouth
         hint = rec.meta["pose_hint"]
         z = depth_of(rec.mesh, np.array(hint["T_cam_obj"]), hint["scale"])
         assert np.isfinite(z).mean() > 0.97
         errors[share] = float(np.nanmean(np.abs(z - front)))
     # measured: 1.6 mm open, 7.1 mm closed (a lid over the mouth)
     assert errors[0.5] < 0.003 and errors[np.inf] > 3 * errors[0.5]
-    plane, mask, depth, _, _ = _lying_beaker(towards_camera=False)
+    plane, mask, depth, front, depth_of = _lying_beaker(towards_camera=False)
     rec = Reconstructor(ReconstructConfig())(rgb, mask, K, plane, "", depth)
     assert rec.meta["resting"] == "lying" and "open_top" not in rec.meta
+    # the grasp stage's fallback: the model opened at its end turned away, in the same object
+    # frame; the camera sees the same depth, and the opening is the true mouth
+    T, scale = np.array(rec.meta["pose_hint"]["T_cam_obj"]), rec.meta["pose_hint"]["scale"]
+    closed, opened = depth_of(rec.mesh, T, scale), depth_of(rec.open_alternative, T, scale)
+    assert np.nanmean(np.abs(opened - closed)) < 1e-4
+    v = rec.open_alternative.vertices
+    floor = v[np.hypot(v[:, 0], v[:, 1]) < 0.5 * np.hypot(v[:, 0], v[:, 1]).max(), 2]
+    assert np.ptp(floor) < 0.15  # the axis is covered at one end only: the other is open
+    mouth = 1.0 if floor.mean() < 0.5 else 0.0
+    ends = [T[:3, 3] + scale * z * T[:3, 2] for z in (mouth, 1.0 - mouth)]
+    assert np.linalg.norm(ends[0]) > np.linalg.norm(ends[1])  # turned away from the camera
 
 
 def test_shape_error_on_generated_glassware(synth_set):

@@ -13,7 +13,9 @@ best K per object; where the object has a placed mesh, the best of the first 3K 
 with the friction their exact contacts on it need (the jaws closed onto its triangles, as the
 evaluator closes them on a true mesh), the worst of the grasp as planned and moved
 ``height_tolerance`` up and down. An object where nothing holds (with a placed mesh: whose
-best grasp's exact contacts do not hold) gets other seed points (``redraws``).
+best grasp's exact contacts do not hold) gets other seed points (``redraws``). An object given
+a fallback (a lying vessel's model opened at the end the camera cannot see,
+:func:`sr3d_cli.reconstruct.unseen_mouth`) is planned on it where its own gives no grasp.
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
@@ -132,15 +134,22 @@ class Planner:
         self.gripper = Gripper.from_config(cfg)
 
     def plan(self, scene: Cloud, targets: dict[int, Cloud], plane: Plane,
-             surfaces: dict[int, np.ndarray] | None = None) -> tuple[GraspSet, list[str]]:
+             surfaces: dict[int, np.ndarray] | None = None,
+             fallbacks: dict[int, tuple[Cloud, Cloud, np.ndarray]] | None = None
+             ) -> tuple[GraspSet, list[str]]:
         """Grasps for every object in ``targets`` (contact points), checked against ``scene``
         (every point that can collide, targets included). ``surfaces``: the placed mesh's
         triangles (m, 3, 3) of objects that have one; their best grasps are scored again with
-        the jaws closed exactly on it (:meth:`_rescore`). Returns (grasps, object messages)."""
+        the jaws closed exactly on it (:meth:`_rescore`). ``fallbacks``: (scene, target,
+        triangles) to plan an object on where its own give no grasp (a lying vessel opened at
+        the end the camera cannot see). Returns (grasps, object messages)."""
         sets, messages = [], []
-        surfaces = surfaces or {}
+        surfaces, fallbacks = surfaces or {}, fallbacks or {}
         for k in sorted(targets):
             found, why = self._object(k, targets[k], scene, plane, surfaces.get(k))
+            if len(found) == 0 and k in fallbacks:
+                other_scene, other_target, triangles = fallbacks[k]
+                found, _ = self._object(k, other_target, other_scene, plane, triangles)
             if len(found) == 0:
                 messages.append(f"object {k}: no grasp ({why})")
             sets.append(found)

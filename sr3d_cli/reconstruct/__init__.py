@@ -30,8 +30,13 @@ class ObjectError(ValueError):
 
 @dataclass
 class Reconstruction:
+    """``mesh`` in the object frame; ``meta`` for meshes/<k>.json; ``open_alternative``: the
+    same solid with an end open that the camera cannot see into (:func:`unseen_mouth`), in
+    ``mesh``'s object frame, or None."""
+
     mesh: trimesh.Trimesh
     meta: dict = field(default_factory=dict)
+    open_alternative: trimesh.Trimesh | None = None
 
 
 def normalise_mesh(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
@@ -157,6 +162,27 @@ def open_mouth(fit: RevolutionFit, cfg: ReconstructConfig, mask: np.ndarray, K: 
                                          0.05 * len(xs), 1) else None
 
 
+def unseen_mouth(fit: RevolutionFit, cfg: ReconstructConfig) -> trimesh.Trimesh | None:
+    """A lying ``fit`` (kept closed) opened at an end that can be a mouth (:func:`mouths`; the
+    wider first) and is turned away from the camera, as a mesh in ``fit``'s object frame; else
+    None. Nothing the camera sees tells an open end turned away from a closed one, and most
+    glassware wide at an end is open there: a beaker lying with its mouth away, wider than the
+    gripper's opening, can only be held by its rim. The grasp stage plans on it where the
+    closed model gives no grasp."""
+    if fit.resting != "lying":
+        return None
+    # an end facing the camera was weighed by the readings (:func:`open_mouth`) and kept shut
+    away = [m for m in mouths(fit, cfg) if float(m.axis @ (m.base + m.height * m.axis)) > 0]
+    if not away:
+        return None
+    mouth = away[0]
+    mesh = revolve(mouth.profile, cfg.sections)
+    T_main, T_open = fit.T_cam_obj, mouth.T_cam_obj
+    cam = mesh.vertices * fit.height @ T_open[:3, :3].T + T_open[:3, 3]
+    mesh.vertices = (cam - T_main[:3, 3]) @ T_main[:3, :3] / fit.height
+    return mesh
+
+
 class Reconstructor:
     """One per batch: loads models or the library once; :meth:`__call__` per object."""
 
@@ -201,5 +227,5 @@ class Reconstructor:
         if mouth is not None:
             meta["open_top"] = True
             meta["pose_hint"]["T_cam_obj"] = mouth.T_cam_obj.tolist()  # the mouth is the top
-            fit = mouth
-        return Reconstruction(revolve(fit.profile, cfg.sections), meta)
+            return Reconstruction(revolve(mouth.profile, cfg.sections), meta)
+        return Reconstruction(revolve(fit.profile, cfg.sections), meta, unseen_mouth(fit, cfg))
