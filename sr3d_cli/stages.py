@@ -238,13 +238,14 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
                 raise ValueError(why)
         scene = depth_cloud(depth, K, ids, cfg.stride)
         targets = {int(k): scene.select(scene.labels == k) for k in np.unique(ids) if k > 0}
-        surfaces, fallbacks = {}, {}
+        surfaces, fallbacks, axes = {}, {}, {}
         if depth_source == "repaired":
             placed, opened = {}, {}
             for obj in poses.get("objects", []):
                 k = int(obj["id"])
                 path = find_mesh(source, fid, k)
                 T, scale = np.asarray(obj["T_cam_obj"]), float(obj["scale"])
+                axes[k] = T[:3, 2]  # the object frame's z: its height (lying: its length)
                 for mesh, clouds in ((load_mesh(path), placed), (_open_alternative(path), opened)):
                     if mesh is not None:
                         clouds[k] = (mesh_cloud(mesh, T, scale, k, cfg.mesh_points, seed=k),
@@ -258,7 +259,7 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
             scene = Cloud.concat([scene] + [c for c, _ in placed.values()])
         if only is not None:
             targets = {only: targets[only]}
-        grasps, messages = planner.plan(scene, targets, plane, surfaces, fallbacks)
+        grasps, messages = planner.plan(scene, targets, plane, surfaces, fallbacks, axes)
     except (InputError, ValueError) as exc:
         messages.append(str(exc))
     document = {"source": depth_source, "grasps": grasps.to_json(), "failed": messages,

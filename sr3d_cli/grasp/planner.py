@@ -12,10 +12,11 @@ a grasp centre near half the object's height, weighted (config). Non-maximum sup
 best K per object; where the object has a placed mesh, the best of the first 3K are scored again
 with the friction their exact contacts on it need (the jaws closed onto its triangles, as the
 evaluator closes them on a true mesh), the worst of the grasp as planned and moved
-``height_tolerance`` up and down. An object where nothing holds (with a placed mesh: whose
-best grasp's exact contacts do not hold) gets other seed points (``redraws``). An object given
-a fallback (a lying vessel's model opened at the end the camera cannot see,
-:func:`sr3d_cli.reconstruct.unseen_mouth`) is planned on it where its own gives no grasp.
+``height_tolerance`` either way along the mesh's height axis. An object where nothing holds
+(with a placed mesh: whose best grasp's exact contacts do not hold) gets other seed points
+(``redraws``). An object given a fallback (a lying vessel's model opened at the end the camera
+cannot see, :func:`sr3d_cli.reconstruct.unseen_mouth`) is planned on it where its own gives no
+grasp.
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
@@ -135,21 +136,24 @@ class Planner:
 
     def plan(self, scene: Cloud, targets: dict[int, Cloud], plane: Plane,
              surfaces: dict[int, np.ndarray] | None = None,
-             fallbacks: dict[int, tuple[Cloud, Cloud, np.ndarray]] | None = None
-             ) -> tuple[GraspSet, list[str]]:
+             fallbacks: dict[int, tuple[Cloud, Cloud, np.ndarray]] | None = None,
+             axes: dict[int, np.ndarray] | None = None) -> tuple[GraspSet, list[str]]:
         """Grasps for every object in ``targets`` (contact points), checked against ``scene``
         (every point that can collide, targets included). ``surfaces``: the placed mesh's
         triangles (m, 3, 3) of objects that have one; their best grasps are scored again with
         the jaws closed exactly on it (:meth:`_rescore`). ``fallbacks``: (scene, target,
         triangles) to plan an object on where its own give no grasp (a lying vessel opened at
-        the end the camera cannot see). Returns (grasps, object messages)."""
+        the end the camera cannot see). ``axes``: a placed mesh's height axis (camera frame),
+        along which its fitted height may be off (default: the table normal). Returns (grasps,
+        object messages)."""
         sets, messages = [], []
-        surfaces, fallbacks = surfaces or {}, fallbacks or {}
+        surfaces, fallbacks, axes = surfaces or {}, fallbacks or {}, axes or {}
         for k in sorted(targets):
-            found, why = self._object(k, targets[k], scene, plane, surfaces.get(k))
+            axis = axes.get(k, plane.normal)
+            found, why = self._object(k, targets[k], scene, plane, surfaces.get(k), axis)
             if len(found) == 0 and k in fallbacks:
                 other_scene, other_target, triangles = fallbacks[k]
-                found, _ = self._object(k, other_target, other_scene, plane, triangles)
+                found, _ = self._object(k, other_target, other_scene, plane, triangles, axis)
             if len(found) == 0:
                 messages.append(f"object {k}: no grasp ({why})")
             sets.append(found)
@@ -158,7 +162,8 @@ class Planner:
     # -- one object -----------------------------------------------------------------------------
 
     def _object(self, k: int, target: Cloud, scene: Cloud, plane: Plane,
-                surface: np.ndarray | None = None) -> tuple[GraspSet, str]:
+                surface: np.ndarray | None = None, axis: np.ndarray | None = None
+                ) -> tuple[GraspSet, str]:
         cfg, g = self.cfg, self.gripper
         has_normal = np.linalg.norm(target.normals, axis=1) > 0.5
         target = target.select(has_normal)
@@ -190,7 +195,7 @@ class Planner:
                 break
             # from a deeper pool: where the exact contacts fail the first ten, the next may hold
             grasps, mu = self._rescore(grasps.take(slice(0, EXACT_POOL * cfg.top_k)), k,
-                                       surface, plane, top)
+                                       surface, plane, top, axis)
             if mu <= cfg.friction:
                 break
         if pairs == 0:
@@ -216,14 +221,14 @@ class Planner:
                 + cfg.centre_weight * centred)
 
     def _rescore(self, grasps: GraspSet, k: int, surface: np.ndarray, plane: Plane,
-                 top: float) -> tuple[GraspSet, float]:
+                 top: float, axis: np.ndarray | None = None) -> tuple[GraspSet, float]:
         """Score again with the friction the contacts need where the jaws, closed along the
         closing direction, first touch the placed mesh (``surface`` triangles), as the grasp
         evaluator closes them on a true mesh: the patch normals of :meth:`_try_frames` average
         over sampled points and pass grasps on a rim or a sloped wall whose exact contacts need
-        far more. The contacts are also found with the grasp moved ``height_tolerance`` up and
-        down the table normal, and the worst counts: a fitted model's height is off by a few
-        millimetres, and a grasp that holds only at its exact height (fingertips on a flask's
+        far more. The contacts are also found with the grasp moved ``height_tolerance`` either way
+        along the model's height ``axis`` (default: the table normal), and the worst counts: a
+        fitted model's height is off by a few millimetres, and a grasp that holds only at its exact height (fingertips on a flask's
         shoulder, a pad on a beaker's lip) fails on the true object (study seed 1500, sr3d's
         fits from the true masks, 4 draws: top-1 .782 -> .824). Best first, until the best is
         one scored so (each costs up to three ray casts; most objects need one to three). A
@@ -232,7 +237,8 @@ class Planner:
         from sr3d_cli.grasp.quality import close_jaws
 
         tol = self.cfg.height_tolerance
-        shifts = np.outer([tol, -tol], plane.normal) if tol > 0 else None
+        along = plane.normal if axis is None else axis
+        shifts = np.outer([tol, -tol], along) if tol > 0 else None
         scores, checked = grasps.scores.copy(), np.zeros(len(grasps), bool)
         mu = np.full(len(grasps), np.inf)
         todo = list(np.argsort(-scores, kind="stable")[:EXACT_FIRST])
