@@ -118,8 +118,9 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
         write_mesh(mesh_path(source, fid, k), result.mesh)
         meta = result.meta
         if result.open_alternative is not None:
-            write_mesh(mesh_path(source, fid, k, OPEN_SUFFIX), result.open_alternative)
-            meta = {**meta, "open_alternative": mesh_path(source, fid, k, OPEN_SUFFIX).name}
+            opened = mesh_path(source, fid, k, OPEN_SUFFIX)
+            write_mesh(opened, result.open_alternative)
+            meta = {**meta, "open_alternative": opened.name}
         write_json(mesh_path(source, fid, k, ".json"), meta)
         written += 1
     return written, messages

@@ -149,7 +149,7 @@ class Planner:
         sets, messages = [], []
         surfaces, fallbacks, axes = surfaces or {}, fallbacks or {}, axes or {}
         for k in sorted(targets):
-            axis = axes.get(k, plane.normal)
+            axis = axes.get(k)
             found, why = self._object(k, targets[k], scene, plane, surfaces.get(k), axis)
             if len(found) == 0 and k in fallbacks:
                 other_scene, other_target, triangles = fallbacks[k]
@@ -226,11 +226,12 @@ class Planner:
         closing direction, first touch the placed mesh (``surface`` triangles), as the grasp
         evaluator closes them on a true mesh: the patch normals of :meth:`_try_frames` average
         over sampled points and pass grasps on a rim or a sloped wall whose exact contacts need
-        far more. The contacts are also found with the grasp moved ``height_tolerance`` either way
-        along the model's height ``axis`` (default: the table normal), and the worst counts: a
-        fitted model's height is off by a few millimetres, and a grasp that holds only at its exact height (fingertips on a flask's
-        shoulder, a pad on a beaker's lip) fails on the true object (study seed 1500, sr3d's
-        fits from the true masks, 4 draws: top-1 .782 -> .824). Best first, until the best is
+        far more. The contacts are also found with the grasp moved ``height_tolerance`` either
+        way along the model's height ``axis`` (default: the table normal), and the worst counts:
+        a fitted model's height is off by a few millimetres, and a grasp that holds only at its
+        exact height (fingertips on a flask's shoulder, a pad on a beaker's lip) fails on the
+        true object (study seed 1500, sr3d's fits from the true masks, 4 draws: top-1 .782 ->
+        .824). Best first, until the best is
         one scored so (each costs up to three ray casts; most objects need one to three). A
         contact needing more than :data:`EXACT_MU_CAP` (or none) counts as that. Returns the
         grasps, sorted, and the friction the best one's exact contacts need."""

@@ -17,6 +17,7 @@ from sr3d_cli.config import ReconstructConfig
 from sr3d_cli.geometry.camera import project
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, revolve
+from sr3d_cli.geometry.transforms import apply_T, place_points
 from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, RevolutionFit, fit_revolution,
                                                  off_table_readings, raw_support, smoothed)
 
@@ -177,9 +178,8 @@ def unseen_mouth(fit: RevolutionFit, cfg: ReconstructConfig) -> trimesh.Trimesh 
         return None
     mouth = away[0]
     mesh = revolve(mouth.profile, cfg.sections)
-    T_main, T_open = fit.T_cam_obj, mouth.T_cam_obj
-    cam = mesh.vertices * fit.height @ T_open[:3, :3].T + T_open[:3, 3]
-    mesh.vertices = (cam - T_main[:3, 3]) @ T_main[:3, :3] / fit.height
+    cam = place_points(mesh.vertices, mouth.T_cam_obj, fit.height)
+    mesh.vertices = apply_T(np.linalg.inv(fit.T_cam_obj), cam) / fit.height
     return mesh
 
 
