@@ -316,12 +316,14 @@ def grasp_truth(source: SceneSource, frame_id: str, plane_cfg):
     return TrueScene.build(objects, pts[pts[..., 2] > 0], plane)
 
 
-def evaluate_grasp_frame(source: SceneSource, frame_id: str, cfg) -> dict:
-    """Grasps of a frame judged against its ground truth (see :mod:`sr3d_cli.grasp.quality`)."""
+def evaluate_grasp_frame(source: SceneSource, frame_id: str, cfg, exact_pads: bool = False
+                         ) -> dict:
+    """Grasps of a frame judged against its ground truth (see :mod:`sr3d_cli.grasp.quality`;
+    ``exact_pads``: contacts of the whole flat pads)."""
     from sr3d_cli.grasp.gripper import Gripper
     from sr3d_cli.grasp.quality import judge, summarise
 
     grasps = load_grasps(source, frame_id)
     truth = grasp_truth(source, frame_id, cfg.plane)
-    records = judge(grasps, truth, Gripper.from_config(cfg.grasp))
+    records = judge(grasps, truth, Gripper.from_config(cfg.grasp), exact_pads=exact_pads)
     return summarise(grasps, records, truth.ids, cfg.grasp.friction)

@@ -260,6 +260,32 @@ def test_evaluator_holds_a_wall_between_flat_pads():
     assert diagonal["reason"] == "ok" and 0.9 < diagonal["mu"] < 1.1
 
 
+def test_exact_pads_see_a_lip_the_grid_of_rays_steps_over():
+    """The evaluator's default grid has rows 9.4 mm apart along the finger: a beaker's 3 mm lip
+    between two rows is not seen, and a rim pinch on it is judged as on a plain wall; 5 mm
+    lower, a row meets the lip and the same pinch fails outright. The whole pad's first touch
+    (``exact_pads``) rests on the lip at both heights, and agrees with the grid on the plain
+    beaker. Measured: plain .30/.31 (grid/exact) and .30/.26; lipped .30/2.69 and 5730/2.69."""
+    R = np.stack([[0, 0, 1.0], [1.0, 0, 0], [0, -1.0, 0]], axis=1)  # approach down, close x
+    plain = _beaker(radius=0.03)
+    lipped = _on_table(revolve(open_vessel([(0, 0), (0.03, 0), (0.03, 0.097), (0.0318, 0.1)],
+                                           0.002, 0.004), 96))
+    mu = {}
+    for name, mesh in (("plain", plain), ("lipped", lipped)):
+        for centre in (0.085, 0.09):
+            row = np.concatenate([[1.0, 0.016, 0.02, 0.02], R.ravel(),
+                                  [0.03 - 0.001, 0, TABLE_Z - centre], [1]])
+            for exact in (False, True):
+                record = judge(GraspSet.from_array(row[None]), _truth([mesh]), GRIPPER,
+                               exact_pads=exact)[0]
+                assert record["reason"] == "ok"
+                mu[name, centre, exact] = record["mu"]
+    for centre in (0.085, 0.09):
+        assert mu["plain", centre, True] < 0.4 and mu["plain", centre, False] < 0.4
+        assert mu["lipped", centre, True] > 2.0
+    assert mu["lipped", 0.085, False] < 0.4 and mu["lipped", 0.09, False] > 100
+
+
 def _hand_grasp(width: float, centre_height: float, depth: float) -> GraspSet:
     R = np.stack([[0, 0, 1.0], [1.0, 0, 0], [0, -1.0, 0]], axis=1)  # approach down, close x
     row = np.concatenate([[1.0, width, 0.02, depth], R.ravel(),
