@@ -13,7 +13,8 @@ The grid's rows lie 9.4 mm apart along the finger, so a feature narrower than th
 3 mm lip) can fall between them: the pad is judged to touch the wall below, where a whole flat
 pad would rest on the lip. ``exact_pads`` finds the whole pad's first touch instead
 (:func:`_pad_contact`); the benchmark reports both, as the rim pinches of lipped vessels hold
-by the grid and not by the exact pads (study seed 1500, true geometry: top-1 .973 and .862).
+by the grid and not by the exact pads (study seed 1500, the planner on the true geometry: top-1
+.973 by the grid, .745 by exact pads; .862 where the planner's own check also uses them).
 """
 
 from __future__ import annotations
@@ -151,7 +152,8 @@ def _pad_contact(R: np.ndarray, t: np.ndarray, side: int, width: float, depth: f
                 (sp >= -1e-9) & (sp <= width)
             pts.append(p[ok]), dist.append(sp[ok]), face.append(f[ok])
         # the pad's corners hitting a face
-        corners = np.array([[x, -side * width / 2, z] for x in (lo[0], hi[0]) for z in (lo[1], hi[1])])
+        corners = np.array([[x, -side * width / 2, z] for x in (lo[0], hi[0])
+                            for z in (lo[1], hi[1])])
         d_c, f_c = first_hits(corners, np.broadcast_to([0.0, side, 0.0], corners.shape), local,
                               max_distance=width)
         hit = np.isfinite(d_c)
