@@ -360,6 +360,15 @@ def test_grasp_end_to_end_beats_raw_depth(synth_set, tmp_path):
         assert np.load(out / "grasps" / "000000_hand_poses.npy").shape[1:] == (4, 4)
     assert wins["repaired"] / objects >= 0.5
     assert wins["repaired"] > wins["raw"]
+    # the same grasps judged by exact pad contacts: a valid document that says so
+    result = runner.invoke(cli, ["evaluate", str(scene), "--out", str(out), "-q", "--grasps",
+                                 "--exact-pads"])
+    assert result.exit_code == 0, result.output
+    doc = json.loads((out / "grasp_metrics.json").read_text())
+    assert "exact first touch" in doc["method"] and doc["overall"]["objects"] >= 1
+    assert 0.0 <= doc["overall"]["top1_success"] <= 1.0
+    result = runner.invoke(cli, ["evaluate", str(scene), "--out", str(out), "-q", "--exact-pads"])
+    assert result.exit_code != 0 and "--exact-pads goes with --grasps" in result.output
 
 
 def test_the_placed_mesh_rescores_the_best_grasps_by_their_exact_contacts():
