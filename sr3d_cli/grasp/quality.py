@@ -80,6 +80,14 @@ def _pad_rays(gripper: Gripper, width: float, depth: float, nx: int = 6, nz: int
     return left, right
 
 
+def _facing(triangles: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """Unit normals (p, 3) of ``triangles`` (p, 3, 3), each on the side facing a finger that
+    closes along ``direction``."""
+    n = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    return np.where((n @ direction < 0)[:, None], n, -n)
+
+
 def _contact(origins: np.ndarray, direction: np.ndarray, ids: list[int],
              triangles: list[np.ndarray], width: float, tie: float = 0.001):
     """Where a finger closing from ``origins`` along ``direction`` first touches one of the
@@ -97,11 +105,7 @@ def _contact(origins: np.ndarray, direction: np.ndarray, ids: list[int],
     k, dist, face, tri = best
     patch = dist <= dist.min() + tie
     points = origins[patch] + dist[patch, None] * direction
-    t = tri[face[patch]]
-    n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-    n = np.where((n @ direction < 0)[:, None], n, -n)  # the side facing the finger
-    return k, points, n
+    return k, points, _facing(tri[face[patch]], direction)
 
 
 def _pad_contact(R: np.ndarray, t: np.ndarray, side: int, width: float, depth: float,
@@ -123,6 +127,8 @@ def _pad_contact(R: np.ndarray, t: np.ndarray, side: int, width: float, depth: f
     lo = np.array([depth - L, -H / 2])               # pad footprint in (x, z) of the grasp frame
     hi = np.array([depth, H / 2])
     direction = side * R[:, 1]
+    corners = np.array([[x, -side * width / 2, z] for x in (lo[0], hi[0])
+                        for z in (lo[1], hi[1])])
     best = None
     for k, tri in zip(ids, triangles):
         if not len(tri):
@@ -130,11 +136,11 @@ def _pad_contact(R: np.ndarray, t: np.ndarray, side: int, width: float, depth: f
         local = (tri - t) @ R                          # (m, 3, 3) grasp frame
         sweep = side * local[..., 1] + width / 2       # distance the pad travels to reach it
         uv = local[..., [0, 2]]
-        pts, dist, face = [], [], []
+        # candidate touches: (points, sweep distances, triangle indices)
         # the triangle's corners inside the footprint
         inside = np.all((uv >= lo) & (uv <= hi), axis=-1) & (sweep >= 0) & (sweep <= width)
         f, c = np.nonzero(inside)
-        pts.append(local[f, c]), dist.append(sweep[f, c]), face.append(f)
+        found = [(local[f, c], sweep[f, c], f)]
         # its edges crossing the footprint's four sides, or the pad's starting plane
         a, b = local, np.roll(local, -1, axis=1)
         sa, sb = sweep, np.roll(sweep, -1, axis=1)
@@ -150,28 +156,21 @@ def _pad_contact(R: np.ndarray, t: np.ndarray, side: int, width: float, depth: f
             sp = side * p[:, 1] + width / 2
             ok = np.all((p[:, [0, 2]] >= lo - 1e-9) & (p[:, [0, 2]] <= hi + 1e-9), axis=1) & \
                 (sp >= -1e-9) & (sp <= width)
-            pts.append(p[ok]), dist.append(sp[ok]), face.append(f[ok])
+            found.append((p[ok], sp[ok], f[ok]))
         # the pad's corners hitting a face
-        corners = np.array([[x, -side * width / 2, z] for x in (lo[0], hi[0])
-                            for z in (lo[1], hi[1])])
         d_c, f_c = first_hits(corners, np.broadcast_to([0.0, side, 0.0], corners.shape), local,
                               max_distance=width)
         hit = np.isfinite(d_c)
-        pts.append(corners[hit] + d_c[hit, None] * [0.0, side, 0.0]), dist.append(d_c[hit])
-        face.append(f_c[hit])
-        dist = np.concatenate(dist)
+        found.append((corners[hit] + d_c[hit, None] * [0.0, side, 0.0], d_c[hit], f_c[hit]))
+        pts, dist, face = (np.concatenate(x) for x in zip(*found))
         if len(dist) and (best is None or dist.min() < best[1].min()):
-            best = (k, dist, np.concatenate(pts), np.concatenate(face), tri)
+            best = (k, dist, pts, face, tri)
     if best is None:
         return None
     k, dist, local_pts, face, tri = best
     patch = dist <= dist.min() + tie
     points = local_pts[patch] @ R.T + t
-    tt = tri[face[patch]]
-    n = np.cross(tt[:, 1] - tt[:, 0], tt[:, 2] - tt[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-    n = np.where((n @ direction < 0)[:, None], n, -n)  # the side facing the finger
-    return k, points, n
+    return k, points, _facing(tri[face[patch]], direction)
 
 
 def close_jaws(R: np.ndarray, t: np.ndarray, width: float, depth: float, ids: list[int],
