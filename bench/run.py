@@ -154,29 +154,34 @@ def _planners(cfg: Config) -> list:
     return planners
 
 
+OTHER_CONTACTS = ("pads", "line")  # contact models judged beside the default grid of rays
+
+
 def _over_draws(by_draw: list[list[dict]]) -> dict:
-    """Grasp numbers over frames for each draw, and their mean over draws."""
+    """Grasp numbers over frames for each draw, and their mean over draws; under each of
+    :data:`OTHER_CONTACTS`, the same grasps judged by that contact model."""
     from sr3d_cli.grasp.quality import overall
 
-    draws = [overall(frames) for frames in by_draw]
-    exact = [overall([f["exact_pads"] for f in frames]) for frames in by_draw]
-    top1 = [d["top1_success"] for d in draws]
-    return {"objects": draws[0]["objects"],
-            "objects_with_grasps": float(np.mean([d["objects_with_grasps"] for d in draws])),
-            "top1_success": float(np.mean(top1)),
-            "top10_success": float(np.mean([d["top10_success"] for d in draws])),
-            "top1_by_draw": top1, "draws": draws,
-            "exact_pads": {"top1_success": float(np.mean([d["top1_success"] for d in exact])),
-                           "top10_success": float(np.mean([d["top10_success"] for d in exact])),
-                           "top1_by_draw": [d["top1_success"] for d in exact]}}
+    def summary(frames_by_draw: list[list[dict]]) -> dict:
+        draws = [overall(frames) for frames in frames_by_draw]
+        top1 = [d["top1_success"] for d in draws]
+        return {"objects": draws[0]["objects"],
+                "objects_with_grasps": float(np.mean([d["objects_with_grasps"] for d in draws])),
+                "top1_success": float(np.mean(top1)),
+                "top10_success": float(np.mean([d["top10_success"] for d in draws])),
+                "top1_by_draw": top1, "draws": draws}
+
+    result = summary(by_draw)
+    for model in OTHER_CONTACTS:
+        other = summary([[f[model] for f in frames] for frames in by_draw])
+        result[model] = {k: other[k] for k in ("top1_success", "top10_success", "top1_by_draw")}
+    return result
 
 
 def _judged(source, fid: str, cfg: Config) -> dict:
-    """A frame's grasps judged by the grid of rays on each pad, with the exact pads' judgement
-    under ``exact_pads`` (see :mod:`sr3d_cli.grasp.quality`)."""
-    frame = stages.evaluate_grasp_frame(source, fid, cfg)
-    frame["exact_pads"] = stages.evaluate_grasp_frame(source, fid, cfg, exact_pads=True)
-    return frame
+    """A frame's grasps judged by the grid of rays on each pad, and under each of
+    :data:`OTHER_CONTACTS` by that contact model (see :mod:`sr3d_cli.grasp.quality`)."""
+    return stages.evaluate_grasp_frame(source, fid, cfg, also=OTHER_CONTACTS)
 
 
 def _plan_draws(source, fid: str, planners: list, by_draw: list[list[dict]], cfg: Config
@@ -547,19 +552,23 @@ def _breakdown_report(breakdown: dict) -> list[str]:
              "their true poses with the true depth, on sr3d's reconstruction and placement "
              "from the true masks, and on the whole pipeline; judged as above, mean of "
              f"{draws} draws. Depth over the true object masks.", "",
-             "| grasps planned on | objects | REL | MAE mm | top-1 | top-10 | exact pads: top-1 "
-             "| top-10 |", "|---|---|---|---|---|---|---|---|"]
+             "| grasps planned on | objects | REL | MAE mm | top-1 | top-10 |" + _OTHER_HEAD,
+             "|---|---|---|---|---|---|" + _OTHER_RULE]
     for name, c in breakdown["conditions"].items():
         d, g = c["depth"], c["grasp"]
         lines.append(f"| {name} | {g['objects']} | {d['rel']:.4f} | {1000 * d['mae']:.1f} | "
-                     f"{g['top1_success']:.3f} | {g['top10_success']:.3f} |{_exact(g)}")
+                     f"{g['top1_success']:.3f} | {g['top10_success']:.3f} |{_others(g)}")
     return lines + [""]
 
 
-def _exact(g: dict) -> str:
-    """The exact pads' top-1 and top-10 as two more table cells."""
-    e = g.get("exact_pads")
-    return f" {e['top1_success']:.3f} | {e['top10_success']:.3f} |" if e else " - | - |"
+_OTHER_HEAD = "".join(f" {m}: top-1 | top-10 |" for m in OTHER_CONTACTS)
+_OTHER_RULE = "---|---|" * len(OTHER_CONTACTS)
+
+
+def _others(g: dict) -> str:
+    """Top-1 and top-10 by each of :data:`OTHER_CONTACTS` as more table cells."""
+    return "".join(f" {g[m]['top1_success']:.3f} | {g[m]['top10_success']:.3f} |"
+                   if m in g else " - | - |" for m in OTHER_CONTACTS)
 
 
 def write_report(results: dict, methods) -> None:
@@ -602,14 +611,16 @@ def write_report(results: dict, methods) -> None:
                   f"Friction {grasp['friction']}: jaws closed on the true meshes, force closure, "
                   "collisions with the true scene and table. Top-1: the best grasp of each true "
                   "object (no grasp counts as a failure). Top-10: mean over frames of the 10 best "
-                  "grasps' success. Exact pads: judged by the whole flat pads' first touch "
-                  "instead of a grid of rays on each (see `sr3d_cli/grasp/quality.py`).", "",
+                  "grasps' success. Contacts by a grid of 6 x 3 rays on each pad; the same "
+                  "grasps also judged by `pads` (each whole flat pad's exact first touch) and "
+                  "`line` (one ray per jaw on the closing line through the grasp centre, as "
+                  "GraspNet-1Billion's metric); see `sr3d_cli/grasp/quality.py`.", "",
                   "| planned on | objects | with grasps | top-1 success | top-10 success | "
-                  "exact pads: top-1 | top-10 |", "|---|---|---|---|---|---|---|"]
+                  + _OTHER_HEAD, "|---|---|---|---|---|" + _OTHER_RULE]
         for name in ("repaired", "raw"):
             g = grasp[name]
             lines.append(f"| {name} | {g['objects']} | {g['objects_with_grasps']:g} | "
-                         f"{g['top1_success']:.3f} | {g['top10_success']:.3f} |{_exact(g)}")
+                         f"{g['top1_success']:.3f} | {g['top10_success']:.3f} |{_others(g)}")
         by_draw = ", ".join(f"{v:.3f}" for v in grasp["repaired"].get("top1_by_draw", []))
         lines += ["", f"- repaired: the mean of {len(grasp['repaired'].get('top1_by_draw', []))} "
                   f"random draws of seed points (`grasp.seed` 0, 1, ...); top-1 by draw: "
@@ -624,11 +635,11 @@ def write_report(results: dict, methods) -> None:
                   "frame (sr3d's own masks) to grasps, judged as above. The seed-700 set above "
                   "is the one sr3d's parameters were tuned on and seed 900 the one failures are "
                   "studied on; expect these numbers on new frames.", "",
-                  "| objects | REL | MAE mm | median MAE mm | grasp top-1 | top-10 | "
-                  "exact pads: top-1 | top-10 |", "|---|---|---|---|---|---|---|---|",
+                  "| objects | REL | MAE mm | median MAE mm | grasp top-1 | top-10 |"
+                  + _OTHER_HEAD, "|---|---|---|---|---|---|" + _OTHER_RULE,
                   f"| {g['objects']} | {d['rel']:.4f} | {1000 * d['mae']:.1f} | "
                   f"{1000 * held['median_mae']:.1f} | {g['top1_success']:.3f} | "
-                  f"{g['top10_success']:.3f} |{_exact(g)}", "",
+                  f"{g['top10_success']:.3f} |{_others(g)}", "",
                   "- grasp top-1 by draw: " + ", ".join(f"{v:.3f}" for v in g["top1_by_draw"]),
                   ""]
     lines += _breakdown_report(results.get("breakdown", {}))

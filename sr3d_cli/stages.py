@@ -316,14 +316,22 @@ def grasp_truth(source: SceneSource, frame_id: str, plane_cfg):
     return TrueScene.build(objects, pts[pts[..., 2] > 0], plane)
 
 
-def evaluate_grasp_frame(source: SceneSource, frame_id: str, cfg, exact_pads: bool = False
-                         ) -> dict:
+def evaluate_grasp_frame(source: SceneSource, frame_id: str, cfg, contacts: str = "grid",
+                         also: tuple[str, ...] = ()) -> dict:
     """Grasps of a frame judged against its ground truth (see :mod:`sr3d_cli.grasp.quality`;
-    ``exact_pads``: contacts of the whole flat pads)."""
+    ``contacts``: its contact model). ``also``: other contact models, each judged on the same
+    true scene into the result under its name."""
     from sr3d_cli.grasp.gripper import Gripper
     from sr3d_cli.grasp.quality import judge, summarise
 
     grasps = load_grasps(source, frame_id)
     truth = grasp_truth(source, frame_id, cfg.plane)
-    records = judge(grasps, truth, Gripper.from_config(cfg.grasp), exact_pads=exact_pads)
-    return summarise(grasps, records, truth.ids, cfg.grasp.friction)
+    gripper = Gripper.from_config(cfg.grasp)
+
+    def judged(model: str) -> dict:
+        records = judge(grasps, truth, gripper, contacts=model)
+        return summarise(grasps, records, truth.ids, cfg.grasp.friction)
+
+    result = judged(contacts)
+    result.update({model: judged(model) for model in also})
+    return result

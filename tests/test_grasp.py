@@ -19,7 +19,7 @@ from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.grasp import GraspSet
 from sr3d_cli.grasp.gripper import Gripper
 from sr3d_cli.grasp.planner import Cloud, Planner, in_view, mesh_cloud
-from sr3d_cli.grasp.quality import TrueScene, judge, summarise
+from sr3d_cli.grasp.quality import CONTACTS, TrueScene, judge, summarise
 
 TABLE_Z = 0.6  # camera looks straight down at a table 0.6 m away
 PLANE = Plane(np.array([0.0, 0.0, -1.0]), TABLE_Z)
@@ -260,30 +260,37 @@ def test_evaluator_holds_a_wall_between_flat_pads():
     assert diagonal["reason"] == "ok" and 0.9 < diagonal["mu"] < 1.1
 
 
-def test_exact_pads_see_a_lip_the_grid_of_rays_steps_over():
+def test_contact_models_on_a_lip_the_grid_of_rays_steps_over():
     """The evaluator's default grid has rows 9.4 mm apart along the finger: a beaker's 3 mm lip
     between two rows is not seen, and a rim pinch on it is judged as on a plain wall; 5 mm
     lower, a row meets the lip and the same pinch fails outright. The whole pad's first touch
-    (``exact_pads``) rests on the lip at both heights, and agrees with the grid on the plain
-    beaker. Measured: plain .30/.31 (grid/exact) and .30/.26; lipped .30/2.69 and 5730/2.69."""
+    (``contacts="pads"``) rests on the lip at both heights, and agrees with the grid on the
+    plain beaker. GraspNet's one ray per jaw (``"line"``) sees the lip only where the closing
+    line through the grasp centre crosses it. Measured: plain .30/.31/.03 (grid/pads/line) and
+    .30/.26/.03; lipped .30/2.69/.03 and 5730/2.69/.03; centre 2 mm under the top: lipped
+    line .60, plain .03."""
     R = np.stack([[0, 0, 1.0], [1.0, 0, 0], [0, -1.0, 0]], axis=1)  # approach down, close x
     plain = _beaker(radius=0.03)
     lipped = _on_table(revolve(open_vessel([(0, 0), (0.03, 0), (0.03, 0.097), (0.0318, 0.1)],
                                            0.002, 0.004), 96))
     mu = {}
     for name, mesh in (("plain", plain), ("lipped", lipped)):
-        for centre in (0.085, 0.09):
+        for centre in (0.085, 0.09, 0.098):
             row = np.concatenate([[1.0, 0.016, 0.02, 0.02], R.ravel(),
                                   [0.03 - 0.001, 0, TABLE_Z - centre], [1]])
-            for exact in (False, True):
+            for model in CONTACTS:
                 record = judge(GraspSet.from_array(row[None]), _truth([mesh]), GRIPPER,
-                               exact_pads=exact)[0]
+                               contacts=model)[0]
                 assert record["reason"] == "ok"
-                mu[name, centre, exact] = record["mu"]
+                mu[name, centre, model] = record["mu"]
     for centre in (0.085, 0.09):
-        assert mu["plain", centre, True] < 0.4 and mu["plain", centre, False] < 0.4
-        assert mu["lipped", centre, True] > 2.0
-    assert mu["lipped", 0.085, False] < 0.4 and mu["lipped", 0.09, False] > 100
+        assert mu["plain", centre, "pads"] < 0.4 and mu["plain", centre, "grid"] < 0.4
+        assert mu["lipped", centre, "pads"] > 2.0
+        assert mu["plain", centre, "line"] < 0.1 and mu["lipped", centre, "line"] < 0.1
+    assert mu["lipped", 0.085, "grid"] < 0.4 and mu["lipped", 0.09, "grid"] > 100
+    assert mu["lipped", 0.098, "line"] > 0.5 and mu["plain", 0.098, "line"] < 0.1
+    with pytest.raises(ValueError, match="contact model"):
+        judge(GraspSet.from_array(row[None]), _truth([plain]), GRIPPER, contacts="rays")
 
 
 def _hand_grasp(width: float, centre_height: float, depth: float) -> GraspSet:
@@ -360,15 +367,20 @@ def test_grasp_end_to_end_beats_raw_depth(synth_set, tmp_path):
         assert np.load(out / "grasps" / "000000_hand_poses.npy").shape[1:] == (4, 4)
     assert wins["repaired"] / objects >= 0.5
     assert wins["repaired"] > wins["raw"]
-    # the same grasps judged by exact pad contacts: a valid document that says so
-    result = runner.invoke(cli, ["evaluate", str(scene), "--out", str(out), "-q", "--grasps",
-                                 "--exact-pads"])
-    assert result.exit_code == 0, result.output
-    doc = json.loads((out / "grasp_metrics.json").read_text())
-    assert "exact first touch" in doc["method"] and doc["overall"]["objects"] >= 1
-    assert 0.0 <= doc["overall"]["top1_success"] <= 1.0
-    result = runner.invoke(cli, ["evaluate", str(scene), "--out", str(out), "-q", "--exact-pads"])
-    assert result.exit_code != 0 and "--exact-pads goes with --grasps" in result.output
+    # the same grasps judged by the other contact models: valid documents that say which
+    for model in ("pads", "line"):
+        result = runner.invoke(cli, ["evaluate", str(scene), "--out", str(out), "-q",
+                                     "--grasps", "--contacts", model])
+        assert result.exit_code == 0, result.output
+        doc = json.loads((out / "grasp_metrics.json").read_text())
+        assert doc["contacts"] == model and CONTACTS[model] in doc["method"]
+        assert doc["overall"]["objects"] >= 1 and 0.0 <= doc["overall"]["top1_success"] <= 1.0
+    result = runner.invoke(cli, ["evaluate", str(scene), "--out", str(out), "-q",
+                                 "--contacts", "pads"])
+    assert result.exit_code != 0 and "--contacts goes with --grasps" in result.output
+    # the command line offers exactly the evaluator's contact models
+    option = next(p for p in cli.commands["evaluate"].params if p.name == "contacts")
+    assert list(option.type.choices) == list(CONTACTS)
 
 
 def test_the_placed_mesh_rescores_the_best_grasps_by_their_exact_contacts():

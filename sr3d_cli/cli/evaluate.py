@@ -75,22 +75,23 @@ def _csv(frames: dict[str, dict], means: dict[str, dict]) -> str:
 @click.option("--grasps", "grasps", is_flag=True,
               help="Score grasps/ instead of depth: jaws closed on the true meshes, force "
                    "closure at grasp.friction; writes grasp_metrics.json.")
-@click.option("--exact-pads", is_flag=True,
-              help="With --grasps: find where each flat finger pad first touches exactly, "
-                   "instead of by a grid of 6 x 3 rays on it (which can step over a lip "
-                   "narrower than its 9.4 mm rows; see the README).")
+@click.option("--contacts", type=click.Choice(["grid", "pads", "line"]), default=None,
+              help="With --grasps: how a closing finger's contact is found: rays from a 6 x 3 "
+                   "grid on each pad (default; steps over a lip narrower than its 9.4 mm rows), "
+                   "each flat pad's exact first touch, or one ray along the closing line "
+                   "(GraspNet-1Billion's). See the README.")
 @scene_options
 @common_options
-def evaluate(scene, preds, only_valid, mask_source, plot, grasps, exact_pads, out, frames, fmt):
+def evaluate(scene, preds, only_valid, mask_source, plot, grasps, contacts, out, frames, fmt):
     """Score depth predictions against ground truth over the transparent objects.
 
     Writes metrics.json and metrics.csv (to --out, else SCENE) and prints the mean table.
     With --grasps, scores grasps instead (needs gt/objects: true meshes and poses).
     """
     if grasps:
-        return _evaluate_grasps(scene, out, frames, fmt, exact_pads)
-    if exact_pads:
-        raise UsageExit("--exact-pads goes with --grasps")
+        return _evaluate_grasps(scene, out, frames, fmt, contacts or "grid")
+    if contacts:
+        raise UsageExit("--contacts goes with --grasps")
     from sr3d_cli import evaluate as core
     from sr3d_cli.io.atomic import write_json, write_png, write_text
 
@@ -148,8 +149,8 @@ def evaluate(scene, preds, only_valid, mask_source, plot, grasps, exact_pads, ou
     report.finish("frames")
 
 
-def _evaluate_grasps(scene, out, frames, fmt, exact_pads: bool = False):
-    from sr3d_cli.grasp.quality import overall
+def _evaluate_grasps(scene, out, frames, fmt, contacts: str = "grid"):
+    from sr3d_cli.grasp.quality import CONTACTS, overall
     from sr3d_cli.io.atomic import write_json
     from sr3d_cli.stages import evaluate_grasp_frame
 
@@ -163,17 +164,15 @@ def _evaluate_grasps(scene, out, frames, fmt, exact_pads: bool = False):
                                  disable=ctx.meta["sr3d.quiet"]):
         try:
             per_frame[source.frame_key(frame_id)] = evaluate_grasp_frame(source, frame_id, cfg,
-                                                                         exact_pads)
+                                                                         contacts)
         except Exception as exc:
             report.fail(source.frame_key(frame_id), exc)
             continue
         report.ok()
     summary = overall(list(per_frame.values()))
-    document = {"friction": cfg.grasp.friction, "overall": summary, "frames": per_frame,
-                "failed": report.failures,
-                "method": "jaws closed on the true meshes ("
-                          + ("each flat pad's exact first touch" if exact_pads else
-                             "ray casting from a grid on each finger pad") + "), "
+    document = {"friction": cfg.grasp.friction, "contacts": contacts, "overall": summary,
+                "frames": per_frame, "failed": report.failures,
+                "method": f"jaws closed on the true meshes ({CONTACTS[contacts]}), "
                           "collisions with the true meshes, true depth and table, two-contact "
                           "force closure; top-1 per true object (objects without a grasp "
                           "count as failures), mean success of the 10 best grasps per frame"}

@@ -3,18 +3,22 @@
 For each grasp: (1) the opening must fit the gripper; (2) the open gripper (fingers at the stated
 width, palm) must not reach below the table nor hold points of the true scene (true meshes
 sampled densely, plus the true depth); (3) each finger closes along the closing direction until it
-first touches a true mesh (exact ray casting from a grid on the finger pad); both fingers must
+first touches a true mesh (by one of the contact models below); both fingers must
 touch the same object; (4) force closure of the two contacts with Coulomb friction: the line
 between the contacts must lie inside both friction cones. The smallest friction coefficient for
 which (4) holds is recorded, so success at any coefficient (GraspNet-1Billion uses 0.2 ... 1.2)
 is read off without re-running.
 
-The grid's rows lie 9.4 mm apart along the finger, so a feature narrower than that (a beaker's
-3 mm lip) can fall between them: the pad is judged to touch the wall below, where a whole flat
-pad would rest on the lip. ``exact_pads`` finds the whole pad's first touch instead
-(:func:`_pad_contact`); the benchmark reports both, as the rim pinches of lipped vessels hold
-by the grid and not by the exact pads (study seed 1500, the planner on the true geometry: top-1
-.973 by the grid, .745 by exact pads; .862 where the planner's own check also uses them).
+Three contact models (``contacts``, :data:`CONTACTS`), as a pad's contact depends on how it is
+found. ``grid`` (default): rays from 6 x 3 points on each pad. Its rows lie 9.4 mm apart along
+the finger, so a feature narrower than that (a beaker's 3 mm lip) can fall between them: the
+pad is judged to touch the wall below, where a whole flat pad would rest on the lip. ``pads``:
+the whole flat pad's exact first touch (:func:`_pad_contact`); rim pinches of lipped vessels
+hold by the grid and not by it (study seed 1500, the planner on the true geometry: top-1 .973
+by the grid, .745 by exact pads; .862 where the planner's own check also uses them). ``line``:
+one ray per jaw along the closing line through the grasp centre, as GraspNet-1Billion's metric
+closes the jaws (Dex-Net's line of action), which sees neither a lip nor a shoulder off that
+line.
 """
 
 from __future__ import annotations
@@ -30,6 +34,11 @@ from sr3d_cli.grasp import GraspSet
 from sr3d_cli.grasp.gripper import Gripper, count_inside, to_local
 
 FRICTIONS = (0.2, 0.4, 0.5, 0.6, 0.8, 1.0, 1.2)
+CONTACTS = {  # contact models of close_jaws: what each finds, in words for reports
+    "grid": "ray casting from a grid of 6 x 3 points on each finger pad",
+    "pads": "each flat pad's exact first touch",
+    "line": "one ray per jaw along the closing line through the grasp centre (GraspNet's)",
+}
 
 
 @dataclass
@@ -69,12 +78,17 @@ class TrueScene:
         return who
 
 
-def _pad_rays(gripper: Gripper, width: float, depth: float, nx: int = 6, nz: int = 3):
-    """Ray origins on both finger pads (grasp frame) and their closing directions."""
-    L, H = gripper.finger_length, gripper.finger_height
-    xs = np.linspace(depth - L + 0.002, depth - 0.001, nx)
-    zs = np.linspace(-H / 2 + 0.001, H / 2 - 0.001, nz)
-    gx, gz = [a.ravel() for a in np.meshgrid(xs, zs)]
+def _jaw_origins(gripper: Gripper, width: float, depth: float, contacts: str = "grid",
+                 nx: int = 6, nz: int = 3):
+    """Ray origins on both finger pads (grasp frame): a grid of ``nx`` x ``nz`` points on each,
+    or with ``contacts="line"`` the one point on the closing line through the grasp centre."""
+    if contacts == "line":
+        gx, gz = np.zeros(1), np.zeros(1)
+    else:
+        L, H = gripper.finger_length, gripper.finger_height
+        xs = np.linspace(depth - L + 0.002, depth - 0.001, nx)
+        zs = np.linspace(-H / 2 + 0.001, H / 2 - 0.001, nz)
+        gx, gz = [a.ravel() for a in np.meshgrid(xs, zs)]
     left = np.stack([gx, np.full_like(gx, -width / 2), gz], 1)
     right = np.stack([gx, np.full_like(gx, width / 2), gz], 1)
     return left, right
@@ -175,15 +189,18 @@ def _pad_contact(R: np.ndarray, t: np.ndarray, side: int, width: float, depth: f
 
 def close_jaws(R: np.ndarray, t: np.ndarray, width: float, depth: float, ids: list[int],
                triangles: list[np.ndarray], gripper: Gripper, shifts: np.ndarray | None = None,
-               enough: float = math.inf, exact_pads: bool = False
+               enough: float = math.inf, contacts: str = "grid"
                ) -> tuple[str, int | None, float]:
     """Close both fingers of one grasp (rotation ``R``, centre ``t``, opening ``width``,
     ``depth``) onto the meshes (``triangles`` per object of ``ids``): (reason "ok", "no
     contact" or "two objects"; the object touched; the smallest friction coefficient giving
     force closure, inf unless "ok"). ``shifts (s, 3)``: the grasp is also closed moved by each
     (camera frame), and the worst outcome counts (the planner's margin for a model's height
-    error); it stops at the first needing more than ``enough``. ``exact_pads``: contacts of the
-    whole flat pads (:func:`_pad_contact`) instead of the grid of rays (:func:`_contact`)."""
+    error); it stops at the first needing more than ``enough``. ``contacts``: the contact model
+    (:data:`CONTACTS`): rays from each pad (:func:`_contact`) or the whole flat pads
+    (:func:`_pad_contact`)."""
+    if contacts not in CONTACTS:
+        raise ValueError(f"contact model {contacts!r}: one of {', '.join(CONTACTS)}")
     moves = np.zeros((1, 3)) if shifts is None else np.vstack([np.zeros(3), shifts])
     local_moves = moves @ R
     # a finger's rays sweep only the box between the open pads: triangles outside it cannot
@@ -199,18 +216,18 @@ def close_jaws(R: np.ndarray, t: np.ndarray, width: float, depth: float, ids: li
                         & np.all(local.min(axis=1) <= hi, axis=1)])
     worst: tuple[str, int | None, float] = ("ok", None, -1.0)
     for move in moves:
-        if exact_pads:
-            contacts = [_pad_contact(R, t + move, side, width, depth, gripper, ids, near)
-                        for side in (1, -1)]
+        if contacts == "pads":
+            touch = [_pad_contact(R, t + move, side, width, depth, gripper, ids, near)
+                     for side in (1, -1)]
         else:
-            contacts = [_contact(origins @ R.T + t + move, direction, ids, near, width)
-                        for origins, direction in zip(_pad_rays(gripper, width, depth),
-                                                      (R[:, 1], -R[:, 1]))]
-        if any(c is None for c in contacts):
+            touch = [_contact(origins @ R.T + t + move, direction, ids, near, width)
+                     for origins, direction in zip(_jaw_origins(gripper, width, depth, contacts),
+                                                   (R[:, 1], -R[:, 1]))]
+        if any(c is None for c in touch):
             return "no contact", None, math.inf
-        if contacts[0][0] != contacts[1][0]:
+        if touch[0][0] != touch[1][0]:
             return "two objects", None, math.inf
-        (k, p_l, n_l), (_, p_r, n_r) = contacts
+        (k, p_l, n_l), (_, p_r, n_r) = touch
         mu = math.tan(min(closure_angle(p_l, n_l, p_r, n_r), math.radians(89.99)))
         if mu > worst[2]:
             worst = ("ok", k, mu)
@@ -241,10 +258,11 @@ def closure_angle(p_l, n_l, p_r, n_r) -> float:
 
 
 def judge(grasps: GraspSet, truth: TrueScene, gripper: Gripper, *, tolerance: float = 0.001,
-          collision_points: int = 2, exact_pads: bool = False) -> list[dict]:
+          collision_points: int = 2, contacts: str = "grid") -> list[dict]:
     """One record per grasp: ``object`` (true id it is matched to, or None), ``reason``
     ("ok", "too wide", "collision", "below table", "no contact", "two objects"), ``mu`` (smallest
-    friction coefficient giving force closure; inf when it fails before the friction test)."""
+    friction coefficient giving force closure; inf when it fails before the friction test).
+    ``contacts``: the contact model (:data:`CONTACTS`)."""
     out = []
     for i in range(len(grasps)):
         R, t = grasps.R[i], grasps.t[i]
@@ -263,7 +281,7 @@ def judge(grasps: GraspSet, truth: TrueScene, gripper: Gripper, *, tolerance: fl
             rec["reason"] = "collision"
             continue
         reason, k, mu = close_jaws(R, t, w, d, truth.ids, truth.triangles, gripper,
-                                   exact_pads=exact_pads)
+                                   contacts=contacts)
         rec["reason"], rec["mu"] = reason, mu
         if k is not None:
             rec["object"] = k
