@@ -615,7 +615,7 @@ def write_report(results: dict, methods) -> None:
                   "grasps also judged by `pads` (each whole flat pad's exact first touch) and "
                   "`line` (one ray per jaw on the closing line through the grasp centre, as "
                   "GraspNet-1Billion's metric); see `sr3d_cli/grasp/quality.py`.", "",
-                  "| planned on | objects | with grasps | top-1 success | top-10 success | "
+                  "| planned on | objects | with grasps | top-1 success | top-10 success |"
                   + _OTHER_HEAD, "|---|---|---|---|---|" + _OTHER_RULE]
         for name in ("repaired", "raw"):
             g = grasp[name]
