@@ -229,9 +229,42 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         if hidden.any():
             model.radii = _fill_hidden(model.radii, hidden)
             ren = frame.draw(model, K, mask.shape)
-    inter = (frame.obs & ren).sum()
-    union = (frame.obs | ren).sum()
-    return model, float(inter / union) if union else 0.0
+            if resting == "standing":
+                ren = _straighten_hidden(model, hidden, frame, ren, K, mask.shape)
+    return model, _iou(frame.obs, ren)
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    union = (a | b).sum()
+    return float((a & b).sum() / union) if union else 0.0
+
+
+def _straighten_hidden(model: _Model, hidden: np.ndarray, frame: _Frame, ren: np.ndarray,
+                       K: np.ndarray, shape: tuple[int, int], rise: float = 0.35,
+                       loss: float = 0.002) -> np.ndarray:
+    """A profile that only narrows upwards (nowhere wider, by ``rise`` of its largest radius,
+    than at a level below) gets its hidden levels between shown ones moved towards the
+    straight line between those, as far as the outline keeps its IoU (within ``loss``): seen
+    from above, a flask's base covers its cone, which the update leaves dented (up to 12 mm
+    narrow at mid-height; standing flasks fitted to the true masks of study seeds 1500, 1700,
+    1900: mean radius error 1.83, 2.16, 1.93 mm -> 1.44, 1.61, 1.50). For standing fits only:
+    on lying ones it cost grasps (a lying glass and beaker) and fixed none. Changes
+    ``model.radii``; returns the drawn outline."""
+    radii = model.radii
+    shown = np.nonzero(~hidden)[0]
+    if len(shown) < 2 or (radii - np.minimum.accumulate(radii)).max() > rise * radii.max():
+        return ren
+    k = np.arange(len(radii))
+    inside = hidden & (k > shown[0]) & (k < shown[-1])
+    line = np.where(inside, np.maximum(np.interp(k, shown, radii[shown]), radii), radii)
+    floor = _iou(frame.obs, ren) - loss
+    for share in (1.0, 0.5, 0.25):
+        model.radii = radii + share * (line - radii)
+        trial = frame.draw(model, K, shape)
+        if _iou(frame.obs, trial) >= floor:
+            return trial
+    model.radii = radii
+    return ren
 
 
 def _hidden(model: _Model, frame: _Frame, ren: np.ndarray, K: np.ndarray) -> np.ndarray:
