@@ -18,7 +18,8 @@ import numpy as np
 import trimesh
 from scipy.optimize import minimize
 
-from sr3d_cli.align.silhouette import fill_silhouette, project_mesh, surface_depth
+from sr3d_cli.align.silhouette import (fill_silhouette, project_mesh, silhouette_iou,
+                                       surface_depth)
 from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candidates_sphere,
                                           is_axisymmetric)
 from sr3d_cli.config import AlignConfig
@@ -78,11 +79,6 @@ class _Window:
 
 def _soft(mask: np.ndarray) -> np.ndarray:
     return cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 1.5)
-
-
-def _iou(a: np.ndarray, b: np.ndarray) -> float:
-    union = np.count_nonzero(a | b)
-    return np.count_nonzero(a & b) / union if union else 0.0
 
 
 class Aligner:
@@ -405,7 +401,7 @@ class Aligner:
                     except AlignError:
                         continue
                     R, t, scale = refine(R, t, scale)
-                iou = _iou(self._silhouette(R, t, scale, window), window.obs)
+                iou = silhouette_iou(self._silhouette(R, t, scale, window), window.obs)
                 if best is None or iou + prior > best[0]:
                     best = (iou + prior, iou, i, R, t, scale, view, diag)
         if best is None:

@@ -113,3 +113,9 @@ def aspect(mask: np.ndarray) -> float:
     if len(xs) == 0:
         return 1.0
     return float((np.ptp(xs) + 1) / (np.ptp(ys) + 1))
+
+
+def silhouette_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two boolean masks (0 when both are empty)."""
+    union = np.count_nonzero(a | b)
+    return np.count_nonzero(a & b) / union if union else 0.0

@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from sr3d_cli.align.silhouette import project_mesh, surface_depth
+from sr3d_cli.align.silhouette import project_mesh, silhouette_iou, surface_depth
 from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import hull_sides, revolve, silhouette
@@ -229,12 +229,7 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         if hidden.any():
             model.radii = _fill_hidden(model.radii, hidden)
             ren = frame.draw(model, K, mask.shape)
-    return model, _iou(frame.obs, ren)
-
-
-def _iou(a: np.ndarray, b: np.ndarray) -> float:
-    union = (a | b).sum()
-    return float((a & b).sum() / union) if union else 0.0
+    return model, silhouette_iou(frame.obs, ren)
 
 
 def straightened(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, rise: float = 0.35,
@@ -261,10 +256,10 @@ def straightened(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, rise: floa
     k = np.arange(len(radii))
     inside = hidden & (k > shown[0]) & (k < shown[-1])
     line = np.where(inside, np.maximum(np.interp(k, shown, radii[shown]), radii), radii)
-    floor = _iou(frame.obs, ren) - loss
+    floor = silhouette_iou(frame.obs, ren) - loss
     for share in (1.0, 0.5, 0.25):
         model.radii = radii + share * (line - radii)
-        iou = _iou(frame.obs, frame.draw(model, K, mask.shape))
+        iou = silhouette_iou(frame.obs, frame.draw(model, K, mask.shape))
         if iou >= floor:
             return _result(model, "standing", iou)
     return fit
