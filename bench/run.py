@@ -612,7 +612,8 @@ def write_report(results: dict, methods) -> None:
                   "collisions with the true scene and table. Top-1: the best grasp of each true "
                   "object (no grasp counts as a failure). Top-10: mean over frames of the 10 best "
                   "grasps' success. Contacts by a grid of 6 x 3 rays on each pad; the same "
-                  "grasps also judged by `pads` (each whole flat pad's exact first touch) and "
+                  "grasps also judged by `pads` (each whole flat pad's exact first touch, a corner "
+                  "it presses on taking its normal) and "
                   "`line` (one ray per jaw on the closing line through the grasp centre, as "
                   "GraspNet-1Billion's metric); see `sr3d_cli/grasp/quality.py`.", "",
                   "| planned on | objects | with grasps | top-1 success | top-10 success |"

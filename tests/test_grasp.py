@@ -264,11 +264,12 @@ def test_contact_models_on_a_lip_the_grid_of_rays_steps_over():
     """The evaluator's default grid has rows 9.4 mm apart along the finger: a beaker's 3 mm lip
     between two rows is not seen, and a rim pinch on it is judged as on a plain wall; 5 mm
     lower, a row meets the lip and the same pinch fails outright. The whole pad's first touch
-    (``contacts="pads"``) rests on the lip at both heights, and agrees with the grid on the
-    plain beaker. GraspNet's one ray per jaw (``"line"``) sees the lip only where the closing
-    line through the grasp centre crosses it. Measured: plain .30/.31/.03 (grid/pads/line) and
-    .30/.26/.03; lipped .30/2.69/.03 and 5730/2.69/.03; centre 2 mm under the top: lipped
-    line .60, plain .03."""
+    (``contacts="pads"``) rests on the lip's top edge at every height, which stands 3 mm above
+    the inner wall's top: the pinch leans 28 degrees (.53), where on the plain rim the inner
+    pad's two edges on the concave wall push level with the outer contact (0). GraspNet's one
+    ray per jaw (``"line"``) sees the lip only where the closing line through the grasp centre
+    crosses it. Measured: plain .30/0/.03 (grid/pads/line) at each height; lipped .30/.53/.03
+    and 5730/.53/.03; centre 2 mm under the top: lipped line .60, plain .03."""
     R = np.stack([[0, 0, 1.0], [1.0, 0, 0], [0, -1.0, 0]], axis=1)  # approach down, close x
     plain = _beaker(radius=0.03)
     lipped = _on_table(revolve(open_vessel([(0, 0), (0.03, 0), (0.03, 0.097), (0.0318, 0.1)],
@@ -283,14 +284,44 @@ def test_contact_models_on_a_lip_the_grid_of_rays_steps_over():
                                contacts=model)[0]
                 assert record["reason"] == "ok"
                 mu[name, centre, model] = record["mu"]
+    for centre in (0.085, 0.09, 0.098):
+        assert mu["plain", centre, "pads"] < 0.05 and 0.45 < mu["lipped", centre, "pads"] < 0.6
     for centre in (0.085, 0.09):
-        assert mu["plain", centre, "pads"] < 0.4 and mu["plain", centre, "grid"] < 0.4
-        assert mu["lipped", centre, "pads"] > 2.0
+        assert mu["plain", centre, "grid"] < 0.4
         assert mu["plain", centre, "line"] < 0.1 and mu["lipped", centre, "line"] < 0.1
     assert mu["lipped", 0.085, "grid"] < 0.4 and mu["lipped", 0.09, "grid"] > 100
     assert mu["lipped", 0.098, "line"] > 0.5 and mu["plain", 0.098, "line"] < 0.1
     with pytest.raises(ValueError, match="contact model"):
         judge(GraspSet.from_array(row[None]), _truth([plain]), GRIPPER, contacts="rays")
+
+
+def test_exact_pads_take_the_normal_their_kind_of_contact_has():
+    """``contacts="pads"``: a corner or edge of the mesh on a pad's face pushes along the pad's
+    normal, the pad's edge on a face along the face's. A box across its diagonal (its edges on
+    the pads' faces) holds without friction, where the faces' normals (grid, line) need 1.0;
+    the fingertip across a cone's side keeps the cone's slope (27 degrees: .52), and on the
+    neck above it holds. Measured: box 1.0/0/1.0 (grid/pads/line); cone .53/.52/.03 (the
+    line passes above the cone), neck .03/0/.03."""
+    down = np.stack([[0, 0, 1.0], [1.0, 0, 0], [0, -1.0, 0]], axis=1)  # approach down, close x
+
+    def mu(mesh, width, height, depth, turn=np.eye(3), model="pads"):
+        row = np.concatenate([[1.0, width, 0.02, depth], (turn @ down).ravel(),
+                              [0, 0, TABLE_Z - height], [1]])
+        record = judge(GraspSet.from_array(row[None]), _truth([mesh]), GRIPPER,
+                       contacts=model)[0]
+        assert record["reason"] == "ok"
+        return record["mu"]
+
+    box = _on_table(trimesh.creation.box(extents=(0.04, 0.04, 0.08)))
+    c = np.cos(np.pi / 4)
+    diagonal = np.array([[c, -c, 0], [c, c, 0], [0, 0, 1.0]])
+    assert mu(box, 0.07, 0.06, 0.02, diagonal) < 0.05
+    for model in ("grid", "line"):
+        assert 0.9 < mu(box, 0.07, 0.06, 0.02, diagonal, model) < 1.1
+    cone = _on_table(revolve(np.array([[0, 0], [0.05, 0], [0.05, 0.004], [0.015, 0.07],
+                                       [0.015, 0.1], [0, 0.1]]), 96))
+    assert 0.45 < mu(cone, 0.05, 0.09, 0.03) < 0.6
+    assert mu(cone, 0.05, 0.085, 0.01) < 0.05
 
 
 def _hand_grasp(width: float, centre_height: float, depth: float) -> GraspSet:

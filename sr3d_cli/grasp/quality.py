@@ -10,15 +10,17 @@ which (4) holds is recorded, so success at any coefficient (GraspNet-1Billion us
 is read off without re-running.
 
 Three contact models (``contacts``, :data:`CONTACTS`), as a pad's contact depends on how it is
-found. ``grid`` (default): rays from 6 x 3 points on each pad. Its rows lie 9.4 mm apart along
-the finger, so a feature narrower than that (a beaker's 3 mm lip) can fall between them: the
-pad is judged to touch the wall below, where a whole flat pad would rest on the lip. ``pads``:
-the whole flat pad's exact first touch (:func:`_pad_contact`); rim pinches of lipped vessels
-hold by the grid and not by it (study seed 1500, the planner on the true geometry: top-1 .973
-by the grid, .745 by exact pads; .862 where the planner's own check also uses them). ``line``:
-one ray per jaw along the closing line through the grasp centre, as GraspNet-1Billion's metric
-closes the jaws (Dex-Net's line of action), which sees neither a lip nor a shoulder off that
-line.
+found. ``grid`` (default): rays from 6 x 3 points on each pad, with the faces' normals. Its rows
+lie 9.4 mm apart along the finger, so a feature narrower than that (a beaker's 3 mm lip) can
+fall between them: the pad is judged to touch the wall below, where a whole flat pad would rest
+on the lip. ``pads``: the whole flat pad's exact first touch (:func:`_pad_contact`), each
+contact with the normal its kind has: a corner or edge of the mesh pressed by the pad's face
+pushes along the pad's normal (a lip's top edge, a box's edge), the pad's edge on a face along
+the face's (the fingertip on a cone's side). A lipped rim pinch then leans as the lip's top edge
+stands above the inner wall's top (a 3 mm lip: friction .53 against .3 by the grid or 0 on a
+plain rim), which the grid sees only where a row meets the lip. ``line``: one ray per jaw along
+the closing line through the grasp centre, as GraspNet-1Billion's metric closes the jaws
+(Dex-Net's line of action), which sees neither a lip nor a shoulder off that line.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from sr3d_cli.grasp.gripper import Gripper, count_inside, to_local
 FRICTIONS = (0.2, 0.4, 0.5, 0.6, 0.8, 1.0, 1.2)
 CONTACTS = {  # contact models of close_jaws: what each finds, in words for reports
     "grid": "ray casting from a grid of 6 x 3 points on each finger pad",
-    "pads": "each flat pad's exact first touch",
+    "pads": "each flat pad's exact first touch, with the normal of its kind of contact",
     "line": "one ray per jaw along the closing line through the grasp centre (GraspNet's)",
 }
 
@@ -124,7 +126,7 @@ def _contact(origins: np.ndarray, direction: np.ndarray, ids: list[int],
 
 def _pad_contact(R: np.ndarray, t: np.ndarray, side: int, width: float, depth: float,
                  gripper: Gripper, ids: list[int], triangles: list[np.ndarray],
-                 tie: float = 0.001):
+                 tie: float = 0.001, press: float = 1e-4):
     """Where the flat pad of one finger, closing from its open position, first touches one of
     the meshes (``triangles`` per object of ``ids``): (object id, contact points (p, 3),
     outward normals (p, 3)) or None. ``side`` +1: the finger at -width/2 closing along +y of
@@ -136,7 +138,13 @@ def _pad_contact(R: np.ndarray, t: np.ndarray, side: int, width: float, depth: f
     the pad's corners hitting it). A grid of rays would step over a feature narrower than its
     spacing (a beaker's 3 mm lip between rows 9 mm apart) and report a contact elsewhere.
     Every touch within ``tie`` of the first belongs to the patch (a pad on a cylinder touches
-    along a line). Normals are the touched faces' own (see :func:`closure_angle`)."""
+    along a line). The touches within ``press`` of the first take the normal their kind of
+    contact has: a corner of the mesh on the pad's face, the pad's normal (the pad's plane
+    supports the object there: a lip's edge pushes along the pad's normal, not along the lip's
+    sloped face); an edge of the mesh across the pad's edge, the normal to both edges (the
+    fingertip across a cone's side: the cone's own normal); the pad's corner on a face, the
+    face's normal. The rest of the patch keeps the touched faces' normals (see
+    :func:`closure_angle`)."""
     L, H = gripper.finger_length, gripper.finger_height
     lo = np.array([depth - L, -H / 2])               # pad footprint in (x, z) of the grasp frame
     hi = np.array([depth, H / 2])
@@ -150,41 +158,58 @@ def _pad_contact(R: np.ndarray, t: np.ndarray, side: int, width: float, depth: f
         local = (tri - t) @ R                          # (m, 3, 3) grasp frame
         sweep = side * local[..., 1] + width / 2       # distance the pad travels to reach it
         uv = local[..., [0, 2]]
-        # candidate touches: (points, sweep distances, triangle indices)
+        # candidate touches: (points, sweep distances, triangle indices, their own normals in
+        # the grasp frame where the contact's kind sets one, else nan: the face's)
         # the triangle's corners inside the footprint
         inside = np.all((uv >= lo) & (uv <= hi), axis=-1) & (sweep >= 0) & (sweep <= width)
         f, c = np.nonzero(inside)
-        found = [(local[f, c], sweep[f, c], f)]
-        # its edges crossing the footprint's four sides, or the pad's starting plane
+        own = np.full((len(f), 3), np.nan)
+        own[np.all((uv[f, c] > lo) & (uv[f, c] < hi), axis=-1)] = [0.0, -side, 0.0]
+        found = [(local[f, c], sweep[f, c], f, own)]
+        # its edges crossing the footprint's four sides (the pad's edges, along z for the
+        # sides at fixed x and along x for those at fixed z), or the pad's starting plane
         a, b = local, np.roll(local, -1, axis=1)
         sa, sb = sweep, np.roll(sweep, -1, axis=1)
-        ends = [(a[..., 0], b[..., 0], v) for v in (lo[0], hi[0])] + \
-               [(a[..., 2], b[..., 2], v) for v in (lo[1], hi[1])] + [(sa, sb, 0.0)]
-        for ea, eb, v in ends:
+        ends = [(a[..., 0], b[..., 0], v, (0.0, 0.0, 1.0)) for v in (lo[0], hi[0])] + \
+               [(a[..., 2], b[..., 2], v, (1.0, 0.0, 0.0)) for v in (lo[1], hi[1])] + \
+               [(sa, sb, 0.0, None)]
+        for ea, eb, v, pad_edge in ends:
             with np.errstate(divide="ignore", invalid="ignore"):
                 u = (v - ea) / (eb - ea)
             f, e = np.nonzero((u >= 0) & (u <= 1))
             if not len(f):
                 continue
-            p = a[f, e] + u[f, e, None] * (b[f, e] - a[f, e])
+            edge = b[f, e] - a[f, e]
+            p = a[f, e] + u[f, e, None] * edge
             sp = side * p[:, 1] + width / 2
             ok = np.all((p[:, [0, 2]] >= lo - 1e-9) & (p[:, [0, 2]] <= hi + 1e-9), axis=1) & \
                 (sp >= -1e-9) & (sp <= width)
-            found.append((p[ok], sp[ok], f[ok]))
+            own = np.full((int(ok.sum()), 3), np.nan)
+            if pad_edge is not None:
+                n = np.cross(pad_edge, edge[ok])
+                size = np.linalg.norm(n, axis=1)
+                crossing = size > 1e-6 * np.linalg.norm(edge[ok], axis=1)  # not along the edge
+                n = n[crossing] / size[crossing, None]
+                own[crossing] = np.where((n[:, 1] * side > 0)[:, None], -n, n)
+            found.append((p[ok], sp[ok], f[ok], own))
         # the pad's corners hitting a face
         d_c, f_c = first_hits(corners, np.broadcast_to([0.0, side, 0.0], corners.shape), local,
                               max_distance=width)
         hit = np.isfinite(d_c)
-        found.append((corners[hit] + d_c[hit, None] * [0.0, side, 0.0], d_c[hit], f_c[hit]))
-        pts, dist, face = (np.concatenate(x) for x in zip(*found))
+        found.append((corners[hit] + d_c[hit, None] * [0.0, side, 0.0], d_c[hit], f_c[hit],
+                      np.full((int(hit.sum()), 3), np.nan)))
+        pts, dist, face, own = (np.concatenate(x) for x in zip(*found))
         if len(dist) and (best is None or dist.min() < best[1].min()):
-            best = (k, dist, pts, face, tri)
+            best = (k, dist, pts, face, own, tri)
     if best is None:
         return None
-    k, dist, local_pts, face, tri = best
+    k, dist, local_pts, face, own, tri = best
     patch = dist <= dist.min() + tie
     points = local_pts[patch] @ R.T + t
-    return k, points, _facing(tri[face[patch]], direction)
+    normals = _facing(tri[face[patch]], direction)
+    kind = ~np.isnan(own[patch, 0]) & (dist[patch] <= dist.min() + press)
+    normals[kind] = own[patch][kind] @ R.T
+    return k, points, normals
 
 
 def close_jaws(R: np.ndarray, t: np.ndarray, width: float, depth: float, ids: list[int],
@@ -228,7 +253,8 @@ def close_jaws(R: np.ndarray, t: np.ndarray, width: float, depth: float, ids: li
         if touch[0][0] != touch[1][0]:
             return "two objects", None, math.inf
         (k, p_l, n_l), (_, p_r, n_r) = touch
-        mu = math.tan(min(closure_angle(p_l, n_l, p_r, n_r), math.radians(89.99)))
+        mu = math.tan(min(closure_angle(p_l, n_l, p_r, n_r, between=contacts == "pads"),
+                          math.radians(89.99)))
         if mu > worst[2]:
             worst = ("ok", k, mu)
         if mu > enough:
@@ -236,18 +262,32 @@ def close_jaws(R: np.ndarray, t: np.ndarray, width: float, depth: float, ids: li
     return worst
 
 
-def closure_angle(p_l, n_l, p_r, n_r) -> float:
+def closure_angle(p_l, n_l, p_r, n_r, between: bool = False) -> float:
     """The larger angle between a contact's inward normal and the line to the other contact
     (radians); force closure at friction mu iff tan(angle) <= mu. Best over pairs of contacts,
     where a contact is a patch point with its normal, or the patch's centroid with any of the
     patch's normals: a flat pad pressed on a concave surface (the inside of a glass's wall)
     touches along its two edges, whose forces meet between them, although neither edge alone
-    faces the other finger's contact. Normals stay the surface's own, so an edge or a corner
-    is not made any easier to hold.
+    faces the other finger's contact. ``between``: also the midpoint of any two patch points
+    with the bisector of their normals (two equal forces: the pad's two edges on a concave
+    wall push together at any height along them, not only at the centroid). The normals are
+    the contact model's: the grid's are the surface's own, so an edge or a corner is not made
+    any easier to hold.
     p_*, n_* : (p, 3) patch points and outward normals of the left and right finger."""
-    p_l = np.vstack([p_l, np.broadcast_to(p_l.mean(0), p_l.shape)])
-    p_r = np.vstack([p_r, np.broadcast_to(p_r.mean(0), p_r.shape)])
-    n_l, n_r = np.vstack([n_l, n_l]), np.vstack([n_r, n_r])
+    def virtual(p, n):
+        p, n = np.vstack([p, np.broadcast_to(p.mean(0), p.shape)]), np.vstack([n, n])
+        if between:
+            i, j = np.triu_indices(len(p) // 2, 1)
+            if len(i) > 2000:  # a few hundred touches: every midpoint is too many pairs
+                keep = np.linspace(0, len(i) - 1, 2000).astype(np.int64)
+                i, j = i[keep], j[keep]
+            # two equal forces along their normals: the bisector, through the midpoint
+            p = np.vstack([p, (p[i] + p[j]) / 2])
+            n = np.vstack([n, n[i] + n[j]])
+            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        return p, n
+
+    (p_l, n_l), (p_r, n_r) = virtual(p_l, n_l), virtual(p_r, n_r)
     line = p_r[None] - p_l[:, None]                               # (l, r, 3)
     norm = np.linalg.norm(line, axis=-1)
     line = line / np.maximum(norm, 1e-12)[..., None]
