@@ -36,6 +36,7 @@ from sr3d_cli.grasp import GraspSet
 from sr3d_cli.grasp.gripper import Gripper, count_inside, to_local
 
 FRICTIONS = (0.2, 0.4, 0.5, 0.6, 0.8, 1.0, 1.2)
+MIDPOINTS = 400  # most midpoints of a patch's touches closure_angle(between=True) tries
 CONTACTS = {  # contact models of close_jaws: what each finds, in words for reports
     "grid": "ray casting from a grid of 6 x 3 points on each finger pad",
     "pads": "each flat pad's exact first touch, with the normal of its kind of contact",
@@ -275,17 +276,19 @@ def closure_angle(p_l, n_l, p_r, n_r, between: bool = False) -> float:
     any easier to hold.
     p_*, n_* : (p, 3) patch points and outward normals of the left and right finger."""
     def virtual(p, n):
-        p, n = np.vstack([p, np.broadcast_to(p.mean(0), p.shape)]), np.vstack([n, n])
+        if between:  # a corner shared by several triangles is listed once for each
+            p, n = np.split(np.unique(np.round(np.hstack([p, n]), 9), axis=0), 2, axis=1)
+        centroid = np.broadcast_to(p.mean(0), p.shape)
         if between:
-            i, j = np.triu_indices(len(p) // 2, 1)
-            if len(i) > 2000:  # a few hundred touches: every midpoint is too many pairs
-                keep = np.linspace(0, len(i) - 1, 2000).astype(np.int64)
+            i, j = np.triu_indices(len(p), 1)
+            if len(i) > MIDPOINTS:  # many touches: every midpoint is too many pairs to test
+                keep = np.linspace(0, len(i) - 1, MIDPOINTS).astype(np.int64)
                 i, j = i[keep], j[keep]
             # two equal forces along their normals: the bisector, through the midpoint
-            p = np.vstack([p, (p[i] + p[j]) / 2])
-            n = np.vstack([n, n[i] + n[j]])
-            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-        return p, n
+            bisector = n[i] + n[j]
+            bisector /= np.maximum(np.linalg.norm(bisector, axis=1, keepdims=True), 1e-12)
+            return np.vstack([p, centroid, (p[i] + p[j]) / 2]), np.vstack([n, n, bisector])
+        return np.vstack([p, centroid]), np.vstack([n, n])
 
     (p_l, n_l), (p_r, n_r) = virtual(p_l, n_l), virtual(p_r, n_r)
     line = p_r[None] - p_l[:, None]                               # (l, r, 3)
