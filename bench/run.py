@@ -157,24 +157,34 @@ def _planners(cfg: Config) -> list:
 OTHER_CONTACTS = ("pads", "line")  # contact models judged beside the default grid of rays
 
 
-def _over_draws(by_draw: list[list[dict]]) -> dict:
-    """Grasp numbers over frames for each draw, and their mean over draws; under each of
-    :data:`OTHER_CONTACTS`, the same grasps judged by that contact model."""
+def _over_draws(by_draw: list[list[dict]], by_class: bool = True) -> dict:
+    """Grasp numbers over frames for each draw, and their mean over draws (with ``by_class``,
+    top-1 by object class too); under each of :data:`OTHER_CONTACTS`, the same grasps judged
+    by that contact model."""
     from sr3d_cli.grasp.quality import overall
 
     def summary(frames_by_draw: list[list[dict]]) -> dict:
         draws = [overall(frames) for frames in frames_by_draw]
         top1 = [d["top1_success"] for d in draws]
+        classes = {name: {"objects": t["objects"],
+                          "top1_success": float(np.mean([d["top1_by_class"][name]["top1_success"]
+                                                         for d in draws]))}
+                   for name, t in draws[0]["top1_by_class"].items()}
+        if not by_class:  # held out: totals only
+            classes = {}
+            for d in draws:
+                d.pop("top1_by_class")
         return {"objects": draws[0]["objects"],
                 "objects_with_grasps": float(np.mean([d["objects_with_grasps"] for d in draws])),
                 "top1_success": float(np.mean(top1)),
                 "top10_success": float(np.mean([d["top10_success"] for d in draws])),
-                "top1_by_draw": top1, "draws": draws}
+                "top1_by_draw": top1, "top1_by_class": classes, "draws": draws}
 
     result = summary(by_draw)
     for model in OTHER_CONTACTS:
         other = summary([[f[model] for f in frames] for frames in by_draw])
-        result[model] = {k: other[k] for k in ("top1_success", "top10_success", "top1_by_draw")}
+        result[model] = {k: other[k] for k in ("top1_success", "top10_success", "top1_by_draw",
+                                               "top1_by_class")}
     return result
 
 
@@ -269,7 +279,7 @@ def heldout_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict:
         print("held-out", source.name, "done", file=sys.stderr)
     return {"seed": HELD_OUT_SEED, "frames": len(rows), "depth": mean_metrics(rows),
             "median_mae": float(np.median([r["mae"] for r in rows])),
-            "grasp": _over_draws(by_draw)}
+            "grasp": _over_draws(by_draw, by_class=False)}
 
 
 BREAKDOWN_SEED = 1500  # a study set, like seeds 900 and 1300: its frames are looked at one by one
@@ -558,7 +568,24 @@ def _breakdown_report(breakdown: dict) -> list[str]:
         d, g = c["depth"], c["grasp"]
         lines.append(f"| {name} | {g['objects']} | {d['rel']:.4f} | {1000 * d['mae']:.1f} | "
                      f"{g['top1_success']:.3f} | {g['top10_success']:.3f} |{_others(g)}")
-    return lines + [""]
+    conditions = breakdown["conditions"]
+    lines += ["", "Top-1 by object class, contacts by the grid:", ""]
+    return lines + _class_table({name: c["grasp"] for name, c in conditions.items()}) + [""]
+
+
+def _class_table(columns: dict[str, dict]) -> list[str]:
+    """A table of top-1 by object class, one column per grasp summary in ``columns``."""
+    first = next(iter(columns.values())).get("top1_by_class", {})
+    if not first:
+        return ["(no classes: results.json predates them)"]
+    lines = ["| class | objects | " + " | ".join(columns) + " |",
+             "|---|---|" + "---|" * len(columns)]
+    for name, t in first.items():
+        cells = " | ".join(f"{g['top1_by_class'][name]['top1_success']:.3f}"
+                           if name in g.get("top1_by_class", {}) else "-"
+                           for g in columns.values())
+        lines.append(f"| {name} | {t['objects']} | {cells} |")
+    return lines
 
 
 _OTHER_HEAD = "".join(f" {m}: top-1 | top-10 |" for m in OTHER_CONTACTS)
@@ -627,7 +654,10 @@ def write_report(results: dict, methods) -> None:
                   f"random draws of seed points (`grasp.seed` 0, 1, ...); top-1 by draw: "
                   f"{by_draw}; raw: draw 0",
                   f"- grasp stage, median seconds per frame on one core: "
-                  f"{grasp['median_seconds']:.3f}", ""]
+                  f"{grasp['median_seconds']:.3f}", "",
+                  "Top-1 on the repaired scene by object class, by each contact model:", ""]
+        g = grasp["repaired"]
+        lines += _class_table({"grid": g, **{m: g[m] for m in OTHER_CONTACTS if m in g}}) + [""]
     held = results.get("heldout", {})
     if held:
         d, g = held["depth"], held["grasp"]

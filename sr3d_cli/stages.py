@@ -313,7 +313,18 @@ def grasp_truth(source: SceneSource, frame_id: str, plane_cfg):
         verts = place_points(mesh.vertices, np.asarray(obj["T_cam_obj"]), float(obj["scale"]))
         objects.append((int(obj["id"]), trimesh.Trimesh(verts, mesh.faces, process=False)))
     pts = depth_to_points(depth, camera.K)[::2, ::2]
-    return TrueScene.build(objects, pts[pts[..., 2] > 0], plane)
+    truth = TrueScene.build(objects, pts[pts[..., 2] > 0], plane)
+    truth.classes = {int(o["id"]): object_class(o) for o in gt["objects"]}
+    return truth
+
+
+def object_class(obj: dict) -> str:
+    """A ground-truth object's class in reports: its ``label``, with " lying" where its
+    optional ``pose`` says it lies (synthetic scenes: a goblet holds differently lying)."""
+    from sr3d_cli.grasp.quality import UNLABELLED
+
+    label = str(obj.get("label") or UNLABELLED)
+    return f"{label} lying" if str(obj.get("pose", "")).startswith("lying") else label
 
 
 def evaluate_grasp_frame(source: SceneSource, frame_id: str, cfg, contacts: str = "grid",
@@ -330,7 +341,8 @@ def evaluate_grasp_frame(source: SceneSource, frame_id: str, cfg, contacts: str 
 
     def judged(model: str) -> dict:
         records = judge(grasps, truth, gripper, contacts=model)
-        return summarise(grasps, records, truth.ids, cfg.grasp.friction)
+        return summarise(grasps, records, truth.ids, cfg.grasp.friction,
+                         classes=truth.classes)
 
     result = judged(contacts)
     result.update({model: judged(model) for model in also})

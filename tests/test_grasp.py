@@ -19,7 +19,8 @@ from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.grasp import GraspSet
 from sr3d_cli.grasp.gripper import Gripper
 from sr3d_cli.grasp.planner import Cloud, Planner, in_view, mesh_cloud
-from sr3d_cli.grasp.quality import CONTACTS, TrueScene, judge, summarise
+from sr3d_cli.grasp.quality import CONTACTS, TrueScene, judge, overall, summarise
+from sr3d_cli.stages import object_class
 
 TABLE_Z = 0.6  # camera looks straight down at a table 0.6 m away
 PLANE = Plane(np.array([0.0, 0.0, -1.0]), TABLE_Z)
@@ -90,6 +91,27 @@ def test_cylinder_is_grasped_across_its_diameter():
             assert grasps.widths[i] == pytest.approx(0.05 + 0.01, abs=0.004)
     records = judge(grasps, _truth([cyl]), GRIPPER)
     assert summarise(grasps, records, [1], friction=0.5)["top1"] == {"1": True}
+
+
+def test_top1_is_reported_by_object_class():
+    """A held box and an object with no grasp: each class's top-1 per frame and over frames,
+    adding up to the totals; the class of a ground-truth record is its label, lying apart."""
+    box = _on_table(trimesh.creation.box(extents=(0.05, 0.03, 0.08)))
+    grasps, _ = _plan(box)
+    records = judge(grasps, _truth([box]), GRIPPER)
+    frame = summarise(grasps, records, [1, 2], friction=0.5,
+                      classes={1: "box", 2: "vial lying"})
+    assert frame["top1_by_class"] == {"box": {"objects": 1, "held": 1},
+                                      "vial lying": {"objects": 1, "held": 0}}
+    assert "top1_by_class" in frame and summarise(grasps, records, [1], 0.5)["top1_by_class"] == {}
+    total = overall([frame, frame, summarise(grasps, records, [1], 0.5, classes={1: "box"})])
+    assert total["top1_by_class"] == {"box": {"objects": 3, "top1_success": 1.0},
+                                      "vial lying": {"objects": 2, "top1_success": 0.0}}
+    assert total["objects"] == 5 and total["top1_success"] == pytest.approx(3 / 5)
+    assert object_class({"label": "goblet", "pose": "lying"}) == "goblet lying"
+    assert object_class({"label": "goblet", "pose": "standing"}) == "goblet"
+    assert object_class({"label": "bottle"}) == "bottle"
+    assert object_class({"id": 3}) == "unlabelled"
 
 
 def test_a_tall_cylinder_is_held_lower_than_its_top():
@@ -394,6 +416,11 @@ def test_grasp_end_to_end_beats_raw_depth(synth_set, tmp_path):
             doc = json.loads((out / "grasp_metrics.json").read_text())
             wins[source] += sum(bool(v) for v in doc["frames"]["000000"]["top1"].values())
         objects += doc["overall"]["objects"]
+        by_class = doc["overall"]["top1_by_class"]  # the generator's labels, adding up
+        assert sum(t["objects"] for t in by_class.values()) == doc["overall"]["objects"]
+        assert sum(t["objects"] * t["top1_success"] for t in by_class.values()) == \
+            pytest.approx(doc["overall"]["top1_success"] * doc["overall"]["objects"])
+        assert by_class and "top-1 by class: " in result.output
         assert (out / "grasps" / "000000_preview.png").is_file()
         assert np.load(out / "grasps" / "000000_hand_poses.npy").shape[1:] == (4, 4)
     assert wins["repaired"] / objects >= 0.5

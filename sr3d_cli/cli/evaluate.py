@@ -186,4 +186,8 @@ def _evaluate_grasps(scene, out, frames, fmt, contacts: str = "grid"):
                f"top-10 mean {summary['top10_success']:.3f}  (friction {cfg.grasp.friction:g})")
     click.echo("success by friction: " + "  ".join(
         f"{k}: {v:.3f}" for k, v in summary["success_by_friction"].items()))
+    if summary["top1_by_class"]:
+        click.echo("top-1 by class: " + "  ".join(
+            f"{name} {t['top1_success']:.3f} ({t['objects']})"
+            for name, t in summary["top1_by_class"].items()))
     report.finish("frames")

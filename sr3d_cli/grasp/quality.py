@@ -26,7 +26,7 @@ the closing line through the grasp centre, as GraspNet-1Billion's metric closes 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -36,6 +36,7 @@ from sr3d_cli.grasp import GraspSet
 from sr3d_cli.grasp.gripper import Gripper, count_inside, to_local
 
 FRICTIONS = (0.2, 0.4, 0.5, 0.6, 0.8, 1.0, 1.2)
+UNLABELLED = "unlabelled"  # the class of a true object without a label (reports by class)
 MIDPOINTS = 400  # most midpoints of a patch's touches closure_angle(between=True) tries
 CONTACTS = {  # contact models of close_jaws: what each finds, in words for reports
     "grid": "ray casting from a grid of 6 x 3 points on each finger pad",
@@ -48,13 +49,15 @@ CONTACTS = {  # contact models of close_jaws: what each finds, in words for repo
 class TrueScene:
     """ids (n,), triangles: list of (m, 3, 3) camera-frame triangles per object, points: the
     collision cloud (n, 3), samples: per-object surface samples (for matching grasps to
-    objects), plane: the true table."""
+    objects), plane: the true table; classes: id -> the object's class for reports (may be
+    empty)."""
 
     ids: list[int]
     triangles: list[np.ndarray]
     points: np.ndarray
     samples: list[np.ndarray]
     plane: Plane
+    classes: dict[int, str] = field(default_factory=dict)
 
     @classmethod
     def build(cls, objects: list[tuple[int, object]], depth_points: np.ndarray, plane: Plane,
@@ -332,9 +335,10 @@ def judge(grasps: GraspSet, truth: TrueScene, gripper: Gripper, *, tolerance: fl
 
 
 def summarise(grasps: GraspSet, records: list[dict], object_ids: list[int], friction: float,
-              top: int = 10) -> dict:
+              top: int = 10, classes: dict[int, str] | None = None) -> dict:
     """Per-frame numbers: top-1 success per true object, mean success of the best ``top``
-    grasps, success at each coefficient of :data:`FRICTIONS`."""
+    grasps, success at each coefficient of :data:`FRICTIONS`; with ``classes`` (id -> class),
+    top-1 by class too: {class: {"objects", "held"}}."""
     success = np.array([r["reason"] == "ok" and r["mu"] <= friction for r in records], bool)
     order = np.argsort(-grasps.scores, kind="stable")
     top1 = {}
@@ -345,6 +349,11 @@ def summarise(grasps: GraspSet, records: list[dict], object_ids: list[int], fric
     reasons: dict[str, int] = {}
     for r in records:
         reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
+    by_class: dict[str, dict[str, int]] = {}
+    for k in object_ids if classes else ():
+        tally = by_class.setdefault(classes.get(k) or UNLABELLED, {"objects": 0, "held": 0})
+        tally["objects"] += 1
+        tally["held"] += bool(top1[str(k)])
     return {
         "grasps": len(grasps),
         "objects": len(object_ids),
@@ -357,14 +366,21 @@ def summarise(grasps: GraspSet, records: list[dict], object_ids: list[int], fric
                                                             for r in records]))
                                 if records else math.nan for mu in FRICTIONS},
         "reasons": reasons,
+        "top1_by_class": by_class,
     }
 
 
 def overall(frames: list[dict]) -> dict:
-    """Numbers over frames: top-1 success over all true objects, the other rates averaged over
-    frames."""
+    """Numbers over frames: top-1 success over all true objects (and by class, where the
+    frames give classes), the other rates averaged over frames."""
     objects = sum(f["objects"] for f in frames)
     wins = sum(sum(bool(v) for v in f["top1"].values()) for f in frames)
+    tally: dict[str, list[int]] = {}
+    for f in frames:
+        for name, t in f.get("top1_by_class", {}).items():
+            counts = tally.setdefault(name, [0, 0])
+            counts[0] += t["objects"]
+            counts[1] += t["held"]
 
     def mean(key, sub=None):
         vals = [f[key] if sub is None else f[key][sub] for f in frames]
@@ -375,5 +391,7 @@ def overall(frames: list[dict]) -> dict:
             "objects_with_grasps": sum(f["objects_with_grasps"] for f in frames),
             "top1_success": wins / objects if objects else math.nan,
             "top10_success": mean("top10_success"),
+            "top1_by_class": {name: {"objects": n, "top1_success": held / n}
+                              for name, (n, held) in sorted(tally.items())},
             "success_by_friction": {mu: mean("success_by_friction", mu)
                                     for mu in (frames[0]["success_by_friction"] if frames else {})}}
