@@ -151,6 +151,8 @@ class GraspConfig:
     width_weight: float = 0.16
     approach_weight: float = 0.16
     centre_weight: float = 0.2
+    end_weight: float = 0.2
+    end_band: float = 0.005
 
 
 @dataclass

@@ -114,26 +114,52 @@ def test_top1_is_reported_by_object_class():
     assert object_class({"id": 3}) == "unlabelled"
 
 
+TALL = _on_table(trimesh.creation.cylinder(radius=0.025, height=0.2, sections=64))
+
+
+def _best_on_tall_cylinder(seed: int, **settings):
+    """The best grasp on :data:`TALL` (points drawn with ``seed``) with the grasp config's
+    ``settings``; it must hold on the true cylinder."""
+    target = mesh_cloud(TALL, np.eye(4), 1.0, 1, 3000, seed=seed)
+    cfg = Config().grasp
+    for key, value in settings.items():
+        setattr(cfg, key, value)
+    grasps, _ = Planner(cfg).plan(Cloud.concat([_table_cloud(), target]), {1: target}, PLANE)
+    best = grasps.sorted().take(slice(0, 1))
+    records = judge(best, _truth([TALL]), GRIPPER)
+    assert records[0]["reason"] == "ok" and records[0]["mu"] <= 0.5
+    return best
+
+
 def test_a_tall_cylinder_is_held_lower_than_its_top():
     """The score prefers a grasp centre nearer half the object's height (nearer the centre of
     mass, away from the top, where a model's height error moves the surface most); without that
     term the approach from above wins and the hand takes the very top."""
-    cyl = _on_table(trimesh.creation.cylinder(radius=0.025, height=0.2, sections=64))
     heights = {Config().grasp.centre_weight: [], 0.0: []}
     for seed in range(4):
-        target = mesh_cloud(cyl, np.eye(4), 1.0, 1, 3000, seed=seed)
-        scene = Cloud.concat([_table_cloud(), target])
         for weight in heights:
-            cfg = Config().grasp
-            cfg.centre_weight = weight
-            grasps, _ = Planner(cfg).plan(scene, {1: target}, PLANE)
-            best = grasps.sorted()
+            # the centre term alone (the top-end term: the next test)
+            best = _best_on_tall_cylinder(seed, centre_weight=weight, end_weight=0.0)
             heights[weight].append(float(PLANE.height(best.t[0])) / 0.2)
-            records = judge(best.take(slice(0, 1)), _truth([cyl]), GRIPPER)
-            assert records[0]["reason"] == "ok" and records[0]["mu"] <= 0.5
     # measured over 4 point draws: mean 0.824 of the height with the term, 0.856 without
     assert np.mean(heights[0.0]) > 0.84
     assert np.mean(heights[Config().grasp.centre_weight]) < np.mean(heights[0.0]) - 0.02
+
+
+def test_fingers_keep_off_the_top_end_where_a_lip_would_stand():
+    """A finger reaching within ``end_band`` of the top end (where a rim's lip or a neck's
+    flare stands, which the outline cannot show) costs ``end_weight``: on a tall cylinder the
+    best grasp without the term comes from above over the top; with it, from the side below
+    the band, and it still holds."""
+    reach = {0.0: [], Config().grasp.end_weight: []}
+    for seed in range(4):
+        for weight in reach:
+            best = _best_on_tall_cylinder(seed, end_weight=weight)
+            corners = GRIPPER.corners(best.widths, best.depths)[0, :16] @ best.R[0].T + best.t[0]
+            reach[weight].append(float(PLANE.height(corners).max()))
+    band = Config().grasp.end_band
+    assert min(reach[0.0]) > 0.2 - band  # without the term: over the top, every draw
+    assert max(reach[Config().grasp.end_weight]) < 0.2 - band
 
 
 def test_grasps_stay_where_the_camera_sees_the_object():
@@ -148,8 +174,10 @@ def test_grasps_stay_where_the_camera_sees_the_object():
     assert 0.3 < len(seen.points) / len(placed.points) < 0.9
     assert (project(seen.points, K)[:, 0] <= shape[1] - 1).all()
     best = {}
+    cfg = Config().grasp
+    cfg.end_weight = 0.0  # so that the whole mesh's best grasp is the out-of-view top
     for name, target in (("all", placed), ("seen", seen)):
-        grasps, _ = Planner(Config().grasp).plan(scene, {1: target}, PLANE)
+        grasps, _ = Planner(cfg).plan(scene, {1: target}, PLANE)
         best[name] = grasps.sorted().take(slice(0, 5))
     # measured: the whole mesh's best grasp sits at 0.84 of the height, 141 px right of the
     # centre; held where seen, the top five lie within 114 px and 0.40 of the height
