@@ -166,14 +166,13 @@ def _over_draws(by_draw: list[list[dict]], by_class: bool = True) -> dict:
     def summary(frames_by_draw: list[list[dict]]) -> dict:
         draws = [overall(frames) for frames in frames_by_draw]
         top1 = [d["top1_success"] for d in draws]
+        if not by_class:  # held out: totals only
+            for d in draws:
+                d.pop("top1_by_class")
         classes = {name: {"objects": t["objects"],
                           "top1_success": float(np.mean([d["top1_by_class"][name]["top1_success"]
                                                          for d in draws]))}
-                   for name, t in draws[0]["top1_by_class"].items()}
-        if not by_class:  # held out: totals only
-            classes = {}
-            for d in draws:
-                d.pop("top1_by_class")
+                   for name, t in draws[0].get("top1_by_class", {}).items()}
         return {"objects": draws[0]["objects"],
                 "objects_with_grasps": float(np.mean([d["objects_with_grasps"] for d in draws])),
                 "top1_success": float(np.mean(top1)),

@@ -62,6 +62,15 @@ class Gripper:
         return np.min(self.corners(width, depth) @ up[..., None], axis=(-2, -1)) + \
             plane.height(t)
 
+    def finger_extent(self, R: np.ndarray, width, depth, direction: np.ndarray) -> np.ndarray:
+        """How far the two fingers (of :meth:`boxes`) reach from each grasp centre along
+        ``direction`` (camera frame), for rotations ``R (n, 3, 3)``, openings ``width`` and
+        ``depth`` ``(n,)``: ``(n,)``. A linear function's maximum over a box takes each
+        coordinate at the end its sign picks."""
+        a = np.einsum("nij,i->nj", R, direction)[:, None, None, :]   # (n, 1, 1, 3) grasp frame
+        fingers = self.boxes(width, depth)[:, :2]                    # (n, 2, 2, 3)
+        return np.max(fingers * a, axis=2).sum(-1).max(1)
+
     def reach(self) -> float:
         """Radius around the grasp centre that holds the whole gripper."""
         back = self.finger_length + self.palm_depth

@@ -226,14 +226,8 @@ class Planner:
         approach_up = np.clip(R[:, :, 0] @ -plane.normal, 0, 1)
         centred = 1 - 2 * np.abs(np.clip(plane.height(centre) / top, 0, 1) - 0.5)
         along, top_end = end
-        g = self.gripper
-        a = np.einsum("nij,i->nj", R, along)  # the axis in each grasp frame
-        # the farthest point of the two fingers' boxes along it (a linear function's maximum
-        # over a box: each coordinate at the end its sign picks)
-        reach = (np.maximum((depth - g.finger_length) * a[:, 0], depth * a[:, 0])
-                 + (width / 2 + g.finger_thickness) * np.abs(a[:, 1])
-                 + g.finger_height / 2 * np.abs(a[:, 2]))
-        at_end = reach + centre @ along > top_end - cfg.end_band
+        reach = self.gripper.finger_extent(R, width, depth, along) + centre @ along
+        at_end = reach > top_end - cfg.end_band
         return (cfg.friction_weight * (1 - mu / cfg.friction)
                 + cfg.width_weight * (1 - width / self.gripper.max_width)
                 + cfg.approach_weight * approach_up
