@@ -130,7 +130,7 @@ class GraspConfig:
     base_to_tip: float = 0.1034
     depths: list[float] = field(default_factory=lambda: [0.005, 0.01, 0.02, 0.03, 0.04])
     friction: float = 0.5
-    width_margin: float = 0.005
+    width_margin: float = 0.004
     clearance: float = 0.003
     seeds: int = 64
     seed_bins: int = 12
