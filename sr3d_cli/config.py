@@ -69,6 +69,7 @@ class ReconstructConfig:
     depth_vote: float = 2.0
     axial_view: float = 25.0
     smooth: float = 1.0
+    straight_wall: float = 2.0
     open_top_ratio: float = 0.7
     open_wall: float = 0.0025
     open_base: float = 0.008

@@ -21,8 +21,8 @@ from sr3d_cli.geometry.revolution import open_vessel, profile_from_mesh, revolve
 from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_border, check_mask
-from sr3d_cli.reconstruct.revolution_fit import (_resting_tilt, axial_view_angle, fit_revolution,
-                                                 smoothed)
+from sr3d_cli.reconstruct.revolution_fit import (RevolutionFit, _resting_tilt, axial_view_angle,
+                                                 fit_revolution, smoothed, straight_walls)
 from tests import onnx_builders
 
 K = np.array([[600.0, 0, 319.5], [0, 600, 239.5], [0, 0, 1]])
@@ -597,3 +597,29 @@ def test_an_open_beaker_looked_into_stands_by_the_readings_inside_it(tmp_path):
     assert axis @ plane.normal > np.cos(np.radians(3))
     # measured: 13.95 cm (the hidden rim makes it 10% tall; lying, it was 13.5 cm long)
     assert rec.meta["pose_hint"]["scale"] == pytest.approx(truth["scale"], rel=0.12)
+
+
+def _wall_fit(lean_deg: float, resting: str = "standing", bulge: float = 0.0) -> RevolutionFit:
+    """A 100 mm fit whose wall (40 mm radius at the base) leans ``lean_deg`` outwards, with a
+    lip at the top and ``bulge`` metres of bow at mid-height."""
+    h = 0.1
+    z = np.linspace(0.005, 0.095, 30)
+    r = 0.04 + np.tan(np.radians(lean_deg)) * z + bulge * np.sin(np.pi * z / h)
+    r[-2:] += 0.002  # lip
+    prof = np.vstack([[0.0, 0.0], np.column_stack([r, z]), [0.0, h]]) / h
+    return RevolutionFit(prof, np.zeros(3), np.array([0.0, 0.0, 1.0]), h, resting, 1.0)
+
+
+def test_straight_walls_sets_a_slightly_leaning_wall_upright_and_nothing_else():
+    fit = straight_walls(_wall_fit(1.0), 2.0)
+    r, z = fit.profile[1:-1, 0] * fit.height, fit.profile[1:-1, 1] * fit.height
+    wall = (z >= 0.01) & (z <= 0.09)
+    # the fitted lean (1 deg: 1.4 mm over the wall) is gone, the lip and the ends stay
+    assert np.ptp(r[wall]) < 1e-9
+    assert abs(np.median(r[wall]) - (0.04 + np.tan(np.radians(1.0)) * 0.05)) < 2e-4
+    assert r[-1] - r[wall].max() > 0.0015
+    assert np.allclose(fit.profile[[0, -1]], _wall_fit(1.0).profile[[0, -1]])
+    # a real taper (4 deg), a bowed wall (4 mm), a lying fit or 0 deg: unchanged
+    for other, deg in ((_wall_fit(4.0), 2.0), (_wall_fit(0.5, bulge=0.004), 2.0),
+                       (_wall_fit(1.0, "lying"), 2.0), (_wall_fit(1.0), 0.0)):
+        assert np.array_equal(straight_walls(other, deg).profile, other.profile)

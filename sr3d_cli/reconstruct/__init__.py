@@ -19,7 +19,8 @@ from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.geometry.transforms import apply_T, place_points
 from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, RevolutionFit, fit_revolution,
-                                                 off_table_readings, raw_support, smoothed)
+                                                 off_table_readings, raw_support, smoothed,
+                                                 straight_walls)
 
 BASE_SHARE = 0.15  # of the height: the profile's lowest part, whose widest ring is the base
 MIN_AXIS_PX = 10  # pixels the projected axis must span for its upper half to be told apart
@@ -222,7 +223,7 @@ class Reconstructor:
             name, mesh = self.library.pick(label, fit.profile)
             meta["library_mesh"] = name
             return Reconstruction(mesh, meta)
-        fit = smoothed(fit, cfg.smooth)
+        fit = straight_walls(smoothed(fit, cfg.smooth), cfg.straight_wall)
         mouth = open_mouth(fit, cfg, mask, K, plane, depth)
         if mouth is not None:
             meta["open_top"] = True
