@@ -325,8 +325,9 @@ def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict
     alone), on sr3d's reconstruction and placement from the true masks (segmentation left
     out), and on the whole pipeline; judged as in :func:`grasp_bench`, over
     :data:`BREAKDOWN_DRAWS` draws; under each condition also the top-1 of the objects sr3d's
-    segmenter merged with another (:func:`_merged_objects`) and of the rest. Not part of a
-    plain ``make bench``: ``bench/run.py breakdown``."""
+    segmenter merged with another (:func:`_merged_objects`) and of the rest, and every
+    object's outcomes (:func:`_object_rows`, in ``results.json``). Not part of a plain
+    ``make bench``: ``bench/run.py breakdown``."""
     folder = work / f"study{BREAKDOWN_SEED}"
     generated_set(folder, frames, SynthConfig(seed=BREAKDOWN_SEED, views=1), renderer)
     planners, pipeline = _planners(cfg)[:BREAKDOWN_DRAWS], Pipeline(cfg)
@@ -357,7 +358,26 @@ def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict
                            for frames in by_draw]
     for condition, draws in top1.items():
         conditions[condition]["merged"] = _held_by_merge(draws, merged)
-    return {"seed": BREAKDOWN_SEED, "frames": frames, "conditions": conditions}
+    return {"seed": BREAKDOWN_SEED, "frames": frames, "conditions": conditions,
+            "objects": _object_rows(folder, top1, merged)}
+
+
+def _object_rows(folder: Path, top1: dict[str, list[list[tuple[str, dict]]]],
+                 merged: dict[str, list[int]]) -> list[dict]:
+    """One row per true object of the study set, to look failures up by: scene, id, class,
+    pixels seen, whether sr3d's segmenter merged it with another, and under each condition
+    whether each draw's best grasp on it held (None: no grasp on it)."""
+    rows = []
+    for i, (scene, _) in enumerate(next(iter(top1.values()))[0]):
+        truth = json.loads((folder / scene / "gt" / "objects" / "000000.json").read_text())
+        for obj in truth["objects"]:
+            k = str(obj["id"])
+            rows.append({"scene": scene, "id": obj["id"], "class": stages.object_class(obj),
+                         "visible_pixels": obj.get("visible_pixels"),
+                         "merged": obj["id"] in merged.get(scene, []),
+                         "held": {c: [draw[i][1].get(k) for draw in draws]
+                                  for c, draws in top1.items()}})
+    return rows
 
 
 def _merged_objects(source, fid: str, shape: tuple[int, int], share: float = 0.3) -> list[int]:
