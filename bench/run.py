@@ -356,10 +356,11 @@ def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict
         conditions[condition] = {"depth": mean_metrics(rows), "grasp": _over_draws(by_draw)}
         top1[condition] = [[(name, f["top1"]) for name, f in zip(names, frames)]
                            for frames in by_draw]
-    for condition, draws in top1.items():
-        conditions[condition]["merged"] = _held_by_merge(draws, merged)
+    objects = _object_rows(folder, top1, merged)
+    for condition in conditions:
+        conditions[condition]["merged"] = _held_by_merge(objects, condition)
     return {"seed": BREAKDOWN_SEED, "frames": frames, "conditions": conditions,
-            "objects": _object_rows(folder, top1, merged)}
+            "objects": objects}
 
 
 def _object_rows(folder: Path, top1: dict[str, list[list[tuple[str, dict]]]],
@@ -398,18 +399,16 @@ def _merged_objects(source, fid: str, shape: tuple[int, int], share: float = 0.3
     return out
 
 
-def _held_by_merge(draws: list[list[tuple[str, dict]]], merged: dict[str, list[int]]) -> dict:
-    """Top-1 over the objects sr3d's segmenter merged with another, and over the rest: mean
-    over draws (each draw: a list of (scene, {object id: held or None}))."""
-    held: dict[bool, list[float]] = {True: [], False: []}
-    for frames in draws:
-        kinds = [(int(k) in merged.get(scene, []), bool(ok))
-                 for scene, top1 in frames for k, ok in top1.items()]
-        objects = {kind: sum(m == kind for m, _ in kinds) for kind in held}
-        for kind in held:
-            held[kind].append(sum(ok for m, ok in kinds if m == kind) / max(objects[kind], 1))
-    return {"objects": objects[True], "top1_success": float(np.mean(held[True])),
-            "rest_objects": objects[False], "rest_top1_success": float(np.mean(held[False]))}
+def _held_by_merge(objects: list[dict], condition: str) -> dict:
+    """Top-1 under ``condition`` over the objects sr3d's segmenter merged with another, and
+    over the rest (rows of :func:`_object_rows`): mean over draws."""
+    out = {}
+    for merged, prefix in ((True, ""), (False, "rest_")):
+        held = np.array([row["held"][condition] for row in objects if row["merged"] == merged],
+                        dtype=bool).reshape(-1, BREAKDOWN_DRAWS)  # None (no grasp): not held
+        out[f"{prefix}objects"] = len(held)
+        out[f"{prefix}top1_success"] = float(held.mean(axis=0).mean()) if len(held) else 0.0
+    return out
 
 
 def scale_bench(synth: Path, work: Path, frames: int = 12, repeats: int = 3) -> dict:
