@@ -14,6 +14,7 @@ import numpy as np
 import trimesh
 
 from sr3d_cli.errors import InputError
+from sr3d_cli.geometry.occlusion import occluders
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points
 from sr3d_cli.io.atomic import write_bytes, write_json, write_npy, write_png
@@ -110,8 +111,9 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
         try:
             if plane is None and reconstructor.cfg.backend != "onnx":
                 raise ValueError(why)
+            front = None if plane is None else occluders(ids, k, frame.camera.K, plane)
             result = reconstructor(frame.rgb, ids == k, frame.camera.K, plane,
-                                   record.get("label", ""), frame.depth_m)
+                                   record.get("label", ""), frame.depth_m, front)
         except ValueError as exc:  # ObjectError, and model/fit failures of this object
             messages.append(f"object {k}: {exc}")
             continue
@@ -168,7 +170,8 @@ def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
             if plane is None:
                 raise ValueError(why)
             placement = aligner(load_mesh(path), ids == k, frame.camera.K, plane, frame.depth_m,
-                                hint=_pose_hint(path.with_suffix(".json")))
+                                hint=_pose_hint(path.with_suffix(".json")),
+                                occluders=occluders(ids, k, frame.camera.K, plane))
         except ValueError as exc:
             messages.append(f"object {k}: {exc}")
             continue

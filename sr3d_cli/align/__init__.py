@@ -56,9 +56,10 @@ def _ray(uv, K):
 
 
 class _Window:
-    """Where silhouettes are drawn: the mask's box with a margin, at most ``size`` pixels."""
+    """Where silhouettes are drawn: the mask's box with a margin, at most ``size`` pixels;
+    ``occluders``: the pixels of objects in front, where a silhouette is not compared."""
 
-    def __init__(self, mask: np.ndarray, size: int):
+    def __init__(self, mask: np.ndarray, size: int, occluders: np.ndarray | None = None):
         ys, xs = np.nonzero(mask)
         h, w = np.ptp(ys) + 1, np.ptp(xs) + 1
         pad = int(0.35 * max(h, w)) + 4
@@ -71,6 +72,9 @@ class _Window:
                         [0, self.zoom, -self.origin[1] * self.zoom]])
         self.obs = cv2.warpAffine(mask.astype(np.float32), M, self.shape[::-1],
                                   flags=cv2.INTER_AREA) > 0.5
+        self.occluders = None if occluders is None else \
+            cv2.warpAffine(occluders.astype(np.float32), M, self.shape[::-1],
+                           flags=cv2.INTER_AREA) > 0.5
 
     @property
     def spec(self):
@@ -215,6 +219,8 @@ class Aligner:
         e1 = _unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < 0.9 else np.cross(n, [0, 1.0, 0]))
         e2 = np.cross(n, e1)
         obs = _soft(window.obs)
+        shown = 1.0 if window.occluders is None else 1.0 - window.occluders
+        obs = obs * shown
         pivot = t + scale * self._footprint(R, n)[0]  # contact centre
 
         def pose(x):
@@ -230,7 +236,7 @@ class Aligner:
 
         def cost(x):
             R1, t1, s1 = pose(x)
-            ren = _soft(self._silhouette(R1, t1, s1, window))
+            ren = _soft(self._silhouette(R1, t1, s1, window)) * shown
             inter = np.minimum(obs, ren).sum()
             return 1.0 - inter / max(np.maximum(obs, ren).sum(), 1e-9)
 
@@ -306,12 +312,15 @@ class Aligner:
     # ---- the whole placement ----------------------------------------------------------------
     def __call__(self, mesh: trimesh.Trimesh, mask: np.ndarray, K: np.ndarray,
                  plane: Plane | None, depth_m: np.ndarray,
-                 hint: tuple[np.ndarray, float] | None = None) -> Placement:
+                 hint: tuple[np.ndarray, float] | None = None,
+                 occluders: np.ndarray | None = None) -> Placement:
         """Place ``mesh`` (object frame) so that it explains ``mask`` and rests on ``plane``.
 
         hint : (T_cam_obj, scale) from the reconstruction, if it fitted a pose (sr3d mode uses it
         as one more candidate, refined first; it is accepted at once when its silhouette IoU
-        reaches ``align.hint_accept``)."""
+        reaches ``align.hint_accept``).
+        occluders : (H, W) bool pixels of objects in front that may hide this one: silhouettes
+        are compared with the mask elsewhere (sr3d mode; view matching uses the whole mask)."""
         cfg = self.cfg
         if mask.sum() < 20:
             raise AlignError(f"mask has {int(mask.sum())} px: too small to place a mesh")
@@ -325,7 +334,7 @@ class Aligner:
         self.faces = np.asarray(mesh.faces)
         ys, xs = np.nonzero(mask)
         self.mask_px = np.column_stack([xs, ys]).astype(np.float64)
-        window = _Window(mask, cfg.window)
+        window = _Window(mask, cfg.window, None if cfg.mode == "paper" else occluders)
         matcher = ViewMatcher(mask, alpha=cfg.alpha, beta=cfg.beta, gamma=cfg.gamma,
                               patches=cfg.patches)
         # the object's place on the table and the image's "down" there
@@ -401,7 +410,8 @@ class Aligner:
                     except AlignError:
                         continue
                     R, t, scale = refine(R, t, scale)
-                iou = silhouette_iou(self._silhouette(R, t, scale, window), window.obs)
+                iou = silhouette_iou(self._silhouette(R, t, scale, window), window.obs,
+                                     window.occluders)
                 if best is None or iou + prior > best[0]:
                     best = (iou + prior, iou, i, R, t, scale, view, diag)
         if best is None:

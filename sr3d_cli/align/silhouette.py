@@ -115,7 +115,10 @@ def aspect(mask: np.ndarray) -> float:
     return float((np.ptp(xs) + 1) / (np.ptp(ys) + 1))
 
 
-def silhouette_iou(a: np.ndarray, b: np.ndarray) -> float:
-    """Intersection over union of two boolean masks (0 when both are empty)."""
+def silhouette_iou(a: np.ndarray, b: np.ndarray, ignore: np.ndarray | None = None) -> float:
+    """Intersection over union of two boolean masks (0 when both are empty), over the pixels
+    outside ``ignore`` when given (where another object may hide either)."""
+    if ignore is not None:
+        a, b = a & ~ignore, b & ~ignore
     union = np.count_nonzero(a | b)
     return np.count_nonzero(a & b) / union if union else 0.0

@@ -117,13 +117,16 @@ def check_border(mask: np.ndarray, cfg: ReconstructConfig, K: np.ndarray,
 
 
 def configured_fit(mask: np.ndarray, K: np.ndarray, plane: Plane, cfg: ReconstructConfig,
-                   depth: np.ndarray | None = None) -> RevolutionFit:
+                   depth: np.ndarray | None = None, occluders: np.ndarray | None = None
+                   ) -> RevolutionFit:
     """:func:`fit_revolution` with the ``reconstruct`` config's settings (the one place they
-    are passed on); ``depth`` is used when ``use_depth`` is on."""
+    are passed on); ``depth`` is used when ``use_depth`` is on; ``occluders``: the pixels of
+    objects in front that may hide this one."""
     return fit_revolution(mask, K, plane, levels=cfg.levels, iterations=cfg.iterations,
                           lying_margin=cfg.lying_margin,
                           depth=depth if cfg.use_depth else None, depth_vote=cfg.depth_vote,
-                          axial_view=cfg.axial_view, openings=lambda fit: mouths(fit, cfg))
+                          axial_view=cfg.axial_view, openings=lambda fit: mouths(fit, cfg),
+                          occluders=occluders)
 
 
 def mouths(fit: RevolutionFit, cfg: ReconstructConfig) -> list[RevolutionFit]:
@@ -201,10 +204,12 @@ class Reconstructor:
             self.library = MeshLibrary(cfg.library)
 
     def __call__(self, rgb: np.ndarray, mask: np.ndarray, K: np.ndarray, plane: Plane | None,
-                 label: str = "", depth: np.ndarray | None = None) -> Reconstruction:
+                 label: str = "", depth: np.ndarray | None = None,
+                 occluders: np.ndarray | None = None) -> Reconstruction:
         """Mesh of the object under ``mask (H, W) bool`` in ``rgb (H, W, 3) uint8``; the raw
         ``depth (H, W)`` metres, when given, helps decide between standing and lying and, seen
-        from above, gives a standing object's height and profile."""
+        from above, gives a standing object's height and profile. ``occluders (H, W) bool``:
+        pixels of objects in front that may hide this one (the fit ignores them)."""
         cfg = self.cfg
         check_mask(mask, cfg)
         if cfg.backend == "onnx":
@@ -213,7 +218,7 @@ class Reconstructor:
             return Reconstruction(mesh, {"backend": "onnx"})
         if plane is None:
             raise ObjectError("no support plane: the revolution fit needs the table")
-        fit = configured_fit(mask, K, plane, cfg, depth)
+        fit = configured_fit(mask, K, plane, cfg, depth, occluders)
         cut = check_border(mask, cfg, K, fit)
         meta = {"backend": cfg.backend, "resting": fit.resting, "silhouette_iou": round(fit.iou, 4),
                 "pose_hint": {"T_cam_obj": fit.T_cam_obj.tolist(), "scale": fit.height}}

@@ -33,6 +33,7 @@ DEPTH_BAND = 0.01  # metres: a raw reading this close to a model's front surface
 DEPTH_MIN_POINTS = 30  # fewest readings on a surface that count as evidence
 DEPTH_SAMPLES = 400  # readings of a mask weighed against fitted surfaces (evenly spread)
 TOP_SHARE = 0.25  # a straight top's height: where the outline is this share of its widest
+NEARER_REACH = 0.2  # share nearer than its outline says a solid whose foot is hidden may stand
 
 
 @dataclass
@@ -84,10 +85,14 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 
 class _Frame:
-    """An image window around the mask, rotated so that the projected axis points up."""
+    """An image window around the mask, rotated so that the projected axis points up. Pixels
+    ``occluders`` (H, W) bool, when given, are where objects in front may hide the one fitted:
+    whatever a model draws there neither matches nor misses the mask (:meth:`seen`,
+    :meth:`iou`); the window then covers them too."""
 
-    def __init__(self, mask: np.ndarray, centre_px: np.ndarray, up_px: np.ndarray, pad: int):
-        ys, xs = np.nonzero(mask)
+    def __init__(self, mask: np.ndarray, centre_px: np.ndarray, up_px: np.ndarray, pad: int,
+                 occluders: np.ndarray | None = None):
+        ys, xs = np.nonzero(mask if occluders is None else mask | occluders)
         self.x0, self.y0 = max(0, xs.min() - pad), max(0, ys.min() - pad)
         x1, y1 = min(mask.shape[1], xs.max() + pad + 1), min(mask.shape[0], ys.max() + pad + 1)
         self.shape = (y1 - self.y0, x1 - self.x0)
@@ -98,13 +103,25 @@ class _Frame:
         self.M[:, 2] += (size / 2 - c[0], size / 2 - c[1])
         self.size = size
         self.obs = self.warp(mask[self.y0:y1, self.x0:x1])
+        self.occluders = None if occluders is None else \
+            self.warp(occluders[self.y0:y1, self.x0:x1])
 
     @classmethod
-    def along(cls, model: "_Model", mask: np.ndarray, K: np.ndarray) -> "_Frame":
+    def along(cls, model: "_Model", mask: np.ndarray, K: np.ndarray,
+              occluders: np.ndarray | None = None) -> "_Frame":
         """The window whose vertical is ``model``'s projected axis, centred between its ends."""
         c0, c1 = project(np.stack([model.base, model.base + model.height * model.axis]), K)
         up = _unit(c1 - c0) if np.linalg.norm(c1 - c0) > 1e-6 else np.array([0.0, -1.0])
-        return cls(mask, (c0 + c1) / 2, up, pad=8)
+        return cls(mask, (c0 + c1) / 2, up, pad=8, occluders=occluders)
+
+    def seen(self, ren: np.ndarray) -> np.ndarray:
+        """The mask as a drawn silhouette ``ren`` should match it: what ``ren`` puts on the
+        occluders' pixels taken as shown."""
+        return self.obs if self.occluders is None else self.obs | (ren & self.occluders)
+
+    def iou(self, ren: np.ndarray) -> float:
+        """Silhouette IoU of ``ren`` against the mask, over the pixels no occluder covers."""
+        return silhouette_iou(self.obs, ren, self.occluders)
 
     def warp(self, window: np.ndarray) -> np.ndarray:
         return cv2.warpAffine(window.astype(np.uint8), self.M, (self.size, self.size),
@@ -154,25 +171,28 @@ def _widths(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 
 def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: str,
-         iterations: int, tilt: bool = False, keep_radii: bool = False) -> tuple[_Model, float]:
+         iterations: int, tilt: bool = False, keep_radii: bool = False,
+         occluders: np.ndarray | None = None) -> tuple[_Model, float]:
     """Refine ``model`` so that its silhouette matches ``mask``; returns (model, IoU). A lying
     model's axis stays parallel to the plane, or with ``tilt`` rests on its hull
     (:func:`_rest_on_hull`). With ``keep_radii`` only the ends and the position move, and the
     top end is matched where the outline is ``TOP_SHARE`` of its widest (a row or two of
-    segmentation spill above a rim would pull a straight top up)."""
+    segmentation spill above a rim would pull a straight top up). On the ``occluders``'
+    pixels (see :class:`_Frame`) the mask takes whatever the model draws."""
     n = plane.normal
     for it in range(iterations + 1):
-        frame = _Frame.along(model, mask, K)
+        frame = _Frame.along(model, mask, K, occluders)
         ren = frame.draw(model, K, mask.shape)
         if it == iterations or not ren.any():
             break
+        obs = frame.seen(ren)
         if not keep_radii:
             rows = frame.point(project(model.centres(), K))[:, 1]
-            ratio = (_widths(frame.obs, rows) + 0.5) / (_widths(ren, rows) + 0.5)
+            ratio = (_widths(obs, rows) + 0.5) / (_widths(ren, rows) + 0.5)
             model.radii = np.clip(model.radii * np.clip(ratio, 0.7, 1.4) ** 0.8,
                                   0.002 * model.height, None)
         share = TOP_SHARE if keep_radii else 0.0
-        t_obs, b_obs, x_obs = _extent(frame.obs, share)
+        t_obs, b_obs, x_obs = _extent(obs, share)
         t_ren, b_ren, x_ren = _extent(ren, share)
         eps = 0.005
         # pixels moved in the window per metre of each parameter (finite differences)
@@ -208,7 +228,7 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             model.base = model.base - step[1] * model.axis + step[2] * side
             model.height = max(model.height + step[0] + step[1], 1e-3)
             # turn the axis in the plane until the silhouette's orientation matches
-            d_img = _orientation(frame.obs) - _orientation(ren)
+            d_img = _orientation(obs) - _orientation(ren)
             if abs(d_img) > 1e-3:
                 turned = rotation_about(n, 0.05) @ model.axis
                 tip = model.base + model.height * turned
@@ -229,11 +249,11 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         if hidden.any():
             model.radii = _fill_hidden(model.radii, hidden)
             ren = frame.draw(model, K, mask.shape)
-    return model, silhouette_iou(frame.obs, ren)
+    return model, frame.iou(ren)
 
 
 def straightened(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, rise: float = 0.35,
-                 loss: float = 0.002) -> RevolutionFit:
+                 loss: float = 0.002, occluders: np.ndarray | None = None) -> RevolutionFit:
     """A standing ``fit`` whose profile only narrows upwards (nowhere wider, by ``rise`` of its
     largest radius, than at a level below) with its hidden levels between shown ones widened
     towards the straight line between those, as far as the outline keeps its IoU (within
@@ -242,12 +262,13 @@ def straightened(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, rise: floa
     study seeds 1500, 1700, 1900: mean radius error 1.83, 2.16, 1.93 mm -> 1.40, 1.46, 1.42).
     Applied to the chosen fit only: the raw readings that decide standing from lying were
     found on the dented surface (seed 700 frame 4: a straightened flask lost its vote to a
-    lying fit), and on lying fits it cost grasps and fixed none."""
+    lying fit), and on lying fits it cost grasps and fixed none. ``occluders``: see
+    :class:`_Frame`."""
     if fit.resting != "standing":
         return fit
     radii = fit.profile[1:-1, 0] * fit.height
     model = _Model(fit.base.copy(), fit.axis.copy(), fit.height, radii.copy())
-    frame = _Frame.along(model, mask, K)
+    frame = _Frame.along(model, mask, K, occluders)
     ren = frame.draw(model, K, mask.shape)
     hidden = _hidden(model, frame, ren, K)
     shown = np.nonzero(~hidden)[0]
@@ -256,10 +277,10 @@ def straightened(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, rise: floa
     k = np.arange(len(radii))
     inside = hidden & (k > shown[0]) & (k < shown[-1])
     line = np.where(inside, np.maximum(np.interp(k, shown, radii[shown]), radii), radii)
-    floor = silhouette_iou(frame.obs, ren) - loss
+    floor = frame.iou(ren) - loss
     for share in (1.0, 0.5, 0.25):
         model.radii = radii + share * (line - radii)
-        iou = silhouette_iou(frame.obs, frame.draw(model, K, mask.shape))
+        iou = frame.iou(frame.draw(model, K, mask.shape))
         if iou >= floor:
             return _result(model, "standing", iou)
     return fit
@@ -274,10 +295,11 @@ def _hidden(model: _Model, frame: _Frame, ren: np.ndarray, K: np.ndarray) -> np.
 
 
 def _straight_top(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane,
-                  iterations: int) -> tuple[_Model, float] | None:
+                  iterations: int, occluders: np.ndarray | None = None
+                  ) -> tuple[_Model, float] | None:
     """The standing ``model`` with its top levels above the highest level the silhouette shows
     widened to that level's radius, its height refitted; None if the top level shows."""
-    frame = _Frame.along(model, mask, K)
+    frame = _Frame.along(model, mask, K, occluders)
     hidden = _hidden(model, frame, frame.draw(model, K, mask.shape), K)
     shown = np.nonzero(~hidden)[0]
     if not hidden[-1] or len(shown) == 0:
@@ -286,7 +308,8 @@ def _straight_top(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane,
     radii = model.radii.copy()
     radii[top + 1:] = np.maximum(radii[top + 1:], radii[top])
     start = _Model(model.base.copy(), model.axis.copy(), model.height, radii)
-    return _fit(start, mask, K, plane, "standing", iterations, keep_radii=True)
+    return _fit(start, mask, K, plane, "standing", iterations, keep_radii=True,
+                occluders=occluders)
 
 
 def _fill_hidden(radii: np.ndarray, hidden: np.ndarray) -> np.ndarray:
@@ -463,16 +486,55 @@ def evenly(readings: tuple[np.ndarray, ...], samples: int) -> tuple[np.ndarray, 
     return tuple(r[pick] for r in readings)
 
 
+def fit_silhouette(fit: RevolutionFit, K: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """The fitted solid's silhouette (H, W) bool in an image of ``shape``."""
+    inner = fit.profile[1:-1] * fit.height
+    return silhouette(fit.base + inner[:, 1:2] * fit.axis, fit.axis, inner[:, 0], K, shape)
+
+
+def fit_depth(fit: RevolutionFit, xs: np.ndarray, ys: np.ndarray, K: np.ndarray,
+              shape: tuple[int, int], far: bool = False) -> np.ndarray:
+    """Depth (n,) of the fitted solid's front surface at pixels (xs, ys) (NaN: off it); with
+    ``far``, of the surface where the rays leave it."""
+    mesh = revolve(fit.profile, 24)
+    T = fit.T_cam_obj
+    uv, pts = project_mesh(np.asarray(mesh.vertices), T[:3, :3], T[:3, 3], fit.height, K)
+    faces = np.asarray(mesh.faces)
+    return surface_depth(uv, pts, faces[:, ::-1] if far else faces, K, xs, ys, shape)
+
+
 def raw_support(fit: RevolutionFit, xs: np.ndarray, ys: np.ndarray, raw: np.ndarray,
                 K: np.ndarray, shape: tuple[int, int], band: float) -> int:
     """How many raw readings lie within ``band`` metres of the fitted solid's front surface."""
     if len(xs) == 0:
         return 0
-    mesh = revolve(fit.profile, 24)
-    T = fit.T_cam_obj
-    uv, pts = project_mesh(np.asarray(mesh.vertices), T[:3, :3], T[:3, 3], fit.height, K)
-    z = surface_depth(uv, pts, np.asarray(mesh.faces), K, xs, ys, shape)
-    return int((np.abs(z - raw) < band).sum())
+    return int((np.abs(fit_depth(fit, xs, ys, K, shape) - raw) < band).sum())
+
+
+def stands_behind(back: RevolutionFit, front: RevolutionFit, pixels: np.ndarray,
+                  K: np.ndarray, plane: Plane, tolerance: float = DEPTH_BAND,
+                  share: float = 0.8, samples: int = 200) -> bool:
+    """Whether solid ``back`` lies behind solid ``front``: its base's foot on ``plane`` no
+    nearer the camera's than ``front``'s (within ``tolerance`` metres), and where both cover
+    ``pixels`` (H, W) bool, on (at least ``share`` of) the rays through both, its front
+    surface no nearer than where they leave ``front``. Two solids cannot pass through each
+    other, so one hidden behind another starts where the other ends."""
+    n = plane.normal
+    reach = [np.linalg.norm(f.base - plane.height(f.base[None])[0] * n + plane.offset * n)
+             for f in (back, front)]  # from the camera's foot on the table
+    if reach[0] < reach[1] - tolerance:
+        return False
+    ys, xs = np.nonzero(pixels)
+    if len(xs) == 0:
+        return True
+    pick = np.linspace(0, len(xs) - 1, min(len(xs), samples)).astype(np.int64)
+    xs, ys = xs[pick], ys[pick]
+    near = fit_depth(back, xs, ys, K, pixels.shape)
+    leave = fit_depth(front, xs, ys, K, pixels.shape, far=True)
+    both = np.isfinite(near) & np.isfinite(leave)
+    if not both.any():
+        return True
+    return bool((near[both] >= leave[both] - tolerance).mean() >= share)
 
 
 def top_height(fit: RevolutionFit, plane: Plane) -> float:
@@ -562,6 +624,86 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
     return RevolutionFit(profile, base, n.copy(), height, "standing", iou)
 
 
+def nearer_factors(fit: RevolutionFit, occluders: np.ndarray, K: np.ndarray, plane: Plane,
+                   mask: np.ndarray, reach: float = NEARER_REACH, step: float = 0.01
+                   ) -> np.ndarray:
+    """Factors ``f <= 1`` (1 first) at which a standing ``fit`` of ``mask`` may stand nearer
+    the camera, its foot hidden by objects in front (``occluders``, (H, W) bool).
+
+    A standing solid's distance comes from the outline's lowest row, where it meets the table.
+    Where an object in front hides that row, the solid may reach further down behind it and
+    stand nearer: scaled by ``f`` about the camera (the outline is unchanged) and continued
+    down to the table at its base radius (:func:`moved_nearer`). Its foot ring on the table
+    must then project onto the occluders or the mask (within 2 px), its nearest point onto
+    the occluders. Factors run from 1 down by ``step`` to the first that fails, at most
+    ``reach`` below 1."""
+    factors = [1.0]
+    if fit.resting != "standing" or not occluders.any():
+        return np.array(factors)
+    n = plane.normal
+    e1 = _unit(np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0]))
+    turn = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    ring = np.cos(turn)[:, None] * e1 + np.sin(turn)[:, None] * np.cross(n, e1)
+    radius = float(fit.profile[1, 0] * fit.height)
+    front = cv2.dilate(occluders.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    either = front | (cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)
+    h, w = mask.shape
+    for f in np.arange(1.0 - step, 1.0 - reach - 1e-9, -step):
+        base = f * fit.base
+        foot = base - plane.height(base[None])[0] * n + f * radius * ring
+        if (foot[:, 2] <= 0).any():
+            break
+        uv = np.rint(project(foot, K)).astype(int)
+        if (uv < 0).any() or (uv[:, 0] >= w).any() or (uv[:, 1] >= h).any():
+            break
+        nearest = int(np.argmin(np.linalg.norm(foot, axis=1)))
+        if not front[uv[nearest, 1], uv[nearest, 0]] or not either[uv[:, 1], uv[:, 0]].all():
+            break
+        factors.append(float(f))
+    return np.array(factors)
+
+
+def moved_nearer(fit: RevolutionFit, factor: float, plane: Plane) -> RevolutionFit:
+    """A standing ``fit`` scaled by ``factor`` about the camera (its outline unchanged) and
+    continued down to the table at its lowest radius (see :func:`nearer_factors`)."""
+    if factor == 1.0:
+        return fit
+    base = factor * fit.base
+    lift = float(plane.height(base[None])[0])
+    height = factor * fit.height + lift
+    z_old = lift + fit.profile[1:-1, 1] * factor * fit.height  # metres above the table
+    r_old = fit.profile[1:-1, 0] * factor * fit.height
+    z = np.linspace(0.0, height, len(r_old))
+    r = np.interp(z, z_old, r_old)  # below the old base: its lowest radius
+    profile = np.vstack([[0.0, 0.0], np.column_stack([r / height, z / height]), [0.0, 1.0]])
+    return RevolutionFit(profile, base - lift * plane.normal, plane.normal.copy(), height,
+                         "standing", fit.iou)
+
+
+def _nearer(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, plane: Plane,
+            iterations: int, occluders: np.ndarray, on_surface: Callable[[RevolutionFit], int],
+            need: int, iou_gap: float, every: int = 2) -> RevolutionFit:
+    """``fit`` refitted standing nearer, at every ``every``-th of :func:`nearer_factors`
+    (from :func:`moved_nearer` there), where most readings lie on its surface, if at least
+    ``need`` do and its IoU is within ``iou_gap`` of the fit's; else ``fit``. The outline
+    above a hidden foot fits a short solid standing where the occluder's outline crosses it;
+    started further down, the fit keeps its foot there behind the occluder, and the readings
+    on what shows tell how far down it stands."""
+    best, most = fit, need - 1
+    for f in nearer_factors(fit, occluders, K, plane, mask)[every::every]:
+        start = moved_nearer(fit, f, plane)
+        levels = len(fit.profile) - 2
+        radii = np.interp(np.linspace(0, 1, levels), start.profile[1:-1, 1],
+                          start.profile[1:-1, 0]) * start.height
+        model = _Model(start.base.copy(), start.axis.copy(), start.height, radii)
+        model, iou = _fit(model, mask, K, plane, "standing", iterations, occluders=occluders)
+        found = _result(model, "standing", iou)
+        count = on_surface(found)
+        if count > most and iou >= fit.iou - iou_gap:
+            best, most = found, count
+    return best
+
+
 def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int = 40,
                    iterations: int = 12, lying_margin: float = 0.03,
                    allow_lying: bool = True, depth: np.ndarray | None = None,
@@ -570,8 +712,8 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
                    axial_view: float = 25.0, axial_iou_gap: float = 0.03,
                    refute_share: float = 0.25, tilt_tolerance: float = 0.01,
                    straight_top_gap: float = 0.002,
-                   openings: Callable[[RevolutionFit], list[RevolutionFit]] | None = None
-                   ) -> RevolutionFit:
+                   openings: Callable[[RevolutionFit], list[RevolutionFit]] | None = None,
+                   occluders: np.ndarray | None = None) -> RevolutionFit:
     """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
 
     Standing and lying are both fitted; the better silhouette wins, lying only by
@@ -606,6 +748,10 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     standing one (seed-1500 study: a 12.6 cm beaker laid down, 29 readings against the lying
     fit's 70; opened, 214). A standing winner's hidden levels are then straightened where its
     profile only narrows upwards (:func:`straightened`).
+    ``occluders`` (H, W) bool are the pixels of objects in front that may hide this one: the
+    outline is compared with the fits elsewhere only (see :class:`_Frame`). A standing winner
+    whose foot they hide is then moved nearer (:func:`nearer_factors`) where ``depth_vote``
+    times more readings (at least ``depth_min_points``) lie on its surface there.
 
     Raises ValueError when neither hypothesis can be set up (e.g. the mask is above the horizon).
     """
@@ -634,10 +780,10 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         model = init(mask, K, plane, levels)
         if model is None:
             continue
-        model, iou = _fit(model, mask, K, plane, resting, iterations)
+        model, iou = _fit(model, mask, K, plane, resting, iterations, occluders=occluders)
         fit, count = _result(model, resting, iou), None
         if resting == "standing":
-            straight = _straight_top(model, mask, K, plane, iterations)
+            straight = _straight_top(model, mask, K, plane, iterations, occluders)
             if straight is not None and straight[1] >= iou - straight_top_gap:
                 candidate = _result(straight[0], resting, straight[1])
                 if not refuted(candidate):
@@ -667,7 +813,11 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         # own start, since the flat fit's radii hold the tilt as a taper
         start = _init_lying(mask, K, plane, levels)
         if start is not None:
-            model, iou = _fit(start, mask, K, plane, "lying", iterations, tilt=True)
+            model, iou = _fit(start, mask, K, plane, "lying", iterations, tilt=True,
+                              occluders=occluders)
             if iou >= best.iou - tilt_tolerance:
                 best = _result(model, "lying", iou)
-    return straightened(best, mask, K)
+    if readings is not None and occluders is not None and best.resting == "standing":
+        best = _nearer(best, mask, K, plane, iterations, occluders, on_surface,
+                       max(depth_min_points, depth_vote * on_surface(best)), vote_iou_gap)
+    return straightened(best, mask, K, occluders=occluders)

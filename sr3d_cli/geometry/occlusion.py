@@ -1,0 +1,67 @@
+"""Which objects hide which: instance masks ordered front to back on the table.
+
+Objects standing on a table seen from above: the nearer an object stands, the lower in the
+image (along the table's "down") its outline ends. An object whose outline touches another's
+and ends higher up stands behind it, and the other may hide part of it, its foot most of all.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from sr3d_cli.geometry.camera import project
+from sr3d_cli.geometry.plane import Plane
+
+TOUCH_PX = 2  # pixels between two outlines that still touch
+NEARER_PX = 2  # pixels further down the image an outline must end to stand in front
+REACH_SHARE = 0.5  # occluder pixels kept within this share of the object's size around it
+
+
+def down_direction(mask: np.ndarray, K: np.ndarray, plane: Plane) -> np.ndarray:
+    """Unit image direction (2,) of 'down the table normal' at the mask's centroid (image +y
+    when the table is not below the camera's view there)."""
+    ys, xs = np.nonzero(mask)
+    ray = np.array([(xs.mean() - K[0, 2]) / K[0, 0], (ys.mean() - K[1, 2]) / K[1, 1], 1.0])
+    p = plane.intersect(ray)
+    if not np.all(np.isfinite(p)):
+        return np.array([0.0, 1.0])
+    a, b = project(np.stack([p, p + 0.05 * plane.normal]), K)
+    d = a - b
+    return d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else np.array([0.0, 1.0])
+
+
+def _lowest(mask: np.ndarray, down: np.ndarray) -> float:
+    ys, xs = np.nonzero(mask)
+    return float((xs * down[0] + ys * down[1]).max())
+
+
+def in_front(other: np.ndarray, mask: np.ndarray, down: np.ndarray) -> bool:
+    """Whether ``other``'s outline touches ``mask``'s (within :data:`TOUCH_PX`) and ends
+    :data:`NEARER_PX` further ``down`` the image: it stands in front and may hide part of it."""
+    if not other.any() or not mask.any():
+        return False
+    near = cv2.dilate(mask.astype(np.uint8), np.ones((2 * TOUCH_PX + 1,) * 2, np.uint8)) > 0
+    return bool((near & other).any()) and _lowest(other, down) > _lowest(mask, down) + NEARER_PX
+
+
+def occluders(ids: np.ndarray, k: int, K: np.ndarray, plane: Plane) -> np.ndarray | None:
+    """Pixels (H, W) bool of the instances of ``ids`` (H, W) int in front of instance ``k``
+    (:func:`in_front`), near it (within :data:`REACH_SHARE` of its size); None if there are
+    none."""
+    mask = ids == k
+    if not mask.any():
+        return None
+    down = down_direction(mask, K, plane)
+    ys, xs = np.nonzero(mask)
+    pad = int(REACH_SHARE * max(np.ptp(ys), np.ptp(xs))) + TOUCH_PX
+    y0, y1 = max(0, ys.min() - pad), min(ids.shape[0], ys.max() + pad + 1)
+    x0, x1 = max(0, xs.min() - pad), min(ids.shape[1], xs.max() + pad + 1)
+    window = ids[y0:y1, x0:x1]
+    out = np.zeros(ids.shape, bool)
+    for j in np.unique(window):
+        if j in (0, k):
+            continue
+        if in_front(window == j, window == k, down):
+            out[y0:y1, x0:x1] |= window == j
+    return out if out.any() else None
