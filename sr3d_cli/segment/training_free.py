@@ -513,11 +513,18 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     if not cuts:
         return [region]
 
+    alone = {}  # id of a part's mask: its fit without occluders
+
     def fit(mask: np.ndarray, occluders: np.ndarray | None = None):
+        if occluders is None and id(mask) in alone:
+            return alone[id(mask)]
         try:
-            return fit_revolution(mask, K, plane, depth=depth, occluders=occluders)
+            found = fit_revolution(mask, K, plane, depth=depth, occluders=occluders)
         except ValueError:  # a part that cannot stand or lie on the table
-            return None
+            found = None
+        if occluders is None:
+            alone[id(mask)] = found
+        return found
 
     down = down_direction(region, K, plane)
 
@@ -526,18 +533,41 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         xs, ys, raw = (r[mask[readings[1], readings[0]]] for r in readings)
         return 0 if found is None else raw_support(found, xs, ys, raw, K, mask.shape, DEPTH_BAND)
 
-    def fit_parts(a: np.ndarray, b: np.ndarray):
+    def margin() -> float:
+        return max(DEPTH_MIN_POINTS, SPLIT_READINGS * whole_on)
+
+    def could_hold(i: int, front: np.ndarray, f_front, back: np.ndarray) -> bool:
+        """Whether cut ``i`` could hold with the best fit of ``back`` there can be (IoU 1, all
+        its readings on it): if not, fitting it again with hidden pixels changes nothing."""
+        if f_front is None:
+            return False
+        on_front, in_back = 0, 0
+        if readings is not None:
+            on_front = on_surface(f_front, front)
+            in_back = int(back[readings[1], readings[0]].sum())
+        area = front.sum() + back.sum()
+        by_outline = i < grouped and f_front.iou > whole.iou and \
+            (f_front.iou * front.sum() + back.sum()) / area >= whole.iou + gain and \
+            (readings is None or on_front + in_back > whole_on - margin())
+        return by_outline or (readings is not None and f_front.iou >= SPLIT_PART_IOU and
+                              min(on_front, in_back) >= DEPTH_MIN_POINTS and
+                              on_front + in_back >= whole_on + margin())
+
+    def fit_parts(i: int, a: np.ndarray, b: np.ndarray):
         """Both parts' fits. A part behind the other (:func:`in_front`) is fitted with the
-        other's pixels as hidden, if that fit then lies behind the other's and its readings
-        bear it out (:data:`HIDDEN_READINGS`); else alone."""
+        other's pixels as hidden, if the cut could then hold, that fit lies behind the other's
+        and its readings bear it out (:data:`HIDDEN_READINGS`); else alone."""
         for front, back in ((a, b), (b, a)):
             if in_front(front, back, down):
-                f_front, f_back = fit(front), fit(back, front)
-                if f_back is None or (f_front is not None and not stands_behind(
-                        f_back, f_front, front & fit_silhouette(f_back, K, region.shape), K,
-                        plane)) or (readings is not None and on_surface(f_back, back) <
-                                    HIDDEN_READINGS * back[readings[1], readings[0]].sum()):
-                    f_back = fit(back)
+                f_front, f_back = fit(front), fit(back)
+                if could_hold(i, front, f_front, back):
+                    hidden = fit(back, front)
+                    if hidden is not None and (f_front is None or stands_behind(
+                            hidden, f_front, front & fit_silhouette(hidden, K, region.shape),
+                            K, plane)) and (readings is None or on_surface(hidden, back) >=
+                                            HIDDEN_READINGS * back[readings[1],
+                                                                   readings[0]].sum()):
+                        f_back = hidden
                 return (f_front, f_back) if front is a else (f_back, f_front)
         return fit(a), fit(b)
 
@@ -547,21 +577,23 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             whole = fit(region)
         if whole is None:
             return [region]
-        fa, fb = fit_parts(a, b)
+        if readings is not None and whole_on is None:
+            whole_on = on_surface(whole, region)
+        if i >= grouped and not in_front(b, a, down) and \
+                (fit(a) is None or fit(a).iou < SPLIT_PART_IOU):
+            continue  # a thin part that cannot hold by the readings (b need not be fitted)
+        fa, fb = fit_parts(i, a, b)
         if i >= grouped and (fa is None or fa.iou < SPLIT_PART_IOU):
-            continue  # a thin part that cannot hold by the readings
+            continue
         ia, ib = (f.iou if f is not None else -1.0 for f in (fa, fb))
         mean = (ia * a.sum() + ib * b.sum()) / (a.sum() + b.sum())
         by_outline = i < grouped and min(ia, ib) > whole.iou and mean >= whole.iou + gain
         by_readings, score = False, mean
         if readings is not None:
-            if whole_on is None:
-                whole_on = on_surface(whole, region)
             sa, sb = on_surface(fa, a), on_surface(fb, b)
-            margin = max(DEPTH_MIN_POINTS, SPLIT_READINGS * whole_on)
             by_readings = (min(ia, ib) >= SPLIT_PART_IOU and min(sa, sb) >= DEPTH_MIN_POINTS
-                           and sa + sb >= whole_on + margin)
-            by_outline &= sa + sb > whole_on - margin
+                           and sa + sb >= whole_on + margin())
+            by_outline &= sa + sb > whole_on - margin()
             score = sa + sb if by_readings else mean
         if not (by_outline or by_readings):
             continue
