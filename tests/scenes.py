@@ -11,6 +11,7 @@ from sr3d_cli.render import RenderMesh, make_renderer
 
 K_TABLE = np.array([[610.0, 0, 319.5], [0, 610, 239.5], [0, 0, 1]])
 ELEVATION = 55.0  # degrees the camera looks down at the table
+GLASS = np.array([[0, 0], [0.03, 0], [0.034, 0.1], [0, 0.1]])  # profile (r, z) m, 10 cm tall
 
 
 def table() -> Plane:

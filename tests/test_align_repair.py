@@ -205,11 +205,10 @@ def test_a_glass_partly_hidden_by_one_in_front_keeps_its_place_when_its_occluder
     from sr3d_cli.config import ReconstructConfig
     from sr3d_cli.geometry.occlusion import occluders
     from sr3d_cli.reconstruct import Reconstructor
-    from tests.scenes import solids_on_table, table_point
+    from tests.scenes import GLASS, solids_on_table, table_point
 
-    glass = [[0, 0], [0.03, 0], [0.034, 0.1], [0, 0.1]]
-    ids, K, plane, depth = solids_on_table([(glass, 0.1, 0.0, -0.03),
-                                            (glass, 0.1, aside, behind - 0.03)])
+    ids, K, plane, depth = solids_on_table([(GLASS, 0.1, 0.0, -0.03),
+                                            (GLASS, 0.1, aside, behind - 0.03)])
     sparse = np.where(np.random.default_rng(0).random(depth.shape) < 0.3, depth, 0.0)
     back, front = ids == 2, occluders(ids, 2, K, plane)
     true_base = table_point(plane, aside, behind - 0.03)

@@ -25,7 +25,7 @@ from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_border, check
 from sr3d_cli.reconstruct.revolution_fit import (RevolutionFit, _resting_tilt, axial_view_angle,
                                                  fit_revolution, smoothed, straight_walls)
 from tests import onnx_builders
-from tests.scenes import solids_on_table, table_point
+from tests.scenes import GLASS, solids_on_table, table_point
 
 K = np.array([[600.0, 0, 319.5], [0, 600, 239.5], [0, 0, 1]])
 
@@ -626,8 +626,6 @@ def test_straight_walls_sets_a_slightly_leaning_wall_upright_and_nothing_else():
                        (_wall_fit(1.0, "lying"), 2.0), (_wall_fit(1.0), 0.0)):
         assert np.array_equal(straight_walls(other, deg).profile, other.profile)
 
-
-GLASS = np.array([[0, 0], [0.03, 0], [0.034, 0.1], [0, 0.1]])
 
 
 @pytest.mark.parametrize("behind, aside", [(0.06, 0.04), (0.08, 0.02), (0.065, 0.03),

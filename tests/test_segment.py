@@ -17,7 +17,7 @@ from sr3d_cli.io.atomic import write_png
 from sr3d_cli.io.images import read_mask
 from sr3d_cli.segment import Segmenter, import_masks, support_plane
 from tests import onnx_builders
-from tests.scenes import solids_on_table
+from tests.scenes import GLASS, solids_on_table
 
 
 def test_support_plane_recovers_a_tilted_table():
@@ -220,9 +220,8 @@ def test_a_glass_partly_hidden_behind_another_is_split_from_it(behind, aside):
     hold the cut. Before, 3 of these 4 stayed one region and the fourth split at IoU .88/.92."""
     from sr3d_cli.segment.training_free import split_touching
 
-    glass = [[0, 0], [0.03, 0], [0.034, 0.1], [0, 0.1]]
-    ids, K, plane, depth = solids_on_table([(glass, 0.1, 0.0, -0.03),
-                                            (glass, 0.1, aside, behind - 0.03)])
+    ids, K, plane, depth = solids_on_table([(GLASS, 0.1, 0.0, -0.03),
+                                            (GLASS, 0.1, aside, behind - 0.03)])
     region = ids > 0
     sparse = np.where(np.random.default_rng(0).random(depth.shape) < 0.3, depth, 0.0)
     parts = split_touching(region, K, plane, depth=sparse)

@@ -23,7 +23,7 @@ from sr3d_cli.align.silhouette import (fill_silhouette, project_mesh, silhouette
 from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candidates_sphere,
                                           is_axisymmetric)
 from sr3d_cli.config import AlignConfig
-from sr3d_cli.geometry.camera import project, unproject
+from sr3d_cli.geometry.camera import unproject
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import make_T, rotation_about
 
@@ -339,11 +339,11 @@ class Aligner:
                               patches=cfg.patches)
         # the object's place on the table and the image's "down" there
         centre = self.mask_px.mean(0)
-        bottom = self.mask_px[np.argmax(self.mask_px @ self._down_at(centre, plane))]
+        bottom = self.mask_px[np.argmax(self.mask_px @ plane.down_at(centre, K))]
         anchor = plane.intersect(_ray(bottom, K))[0]
         if not np.all(np.isfinite(anchor)):
             raise AlignError("the object's contact edge does not meet the support plane")
-        down = self._down_at(bottom, plane)
+        down = plane.down_at(bottom, K)
         symmetric = is_axisymmetric(mesh)
         plain = cfg.mode == "paper"
         searched = {"candidates": 0}
@@ -428,14 +428,6 @@ class Aligner:
                        "candidates": searched["candidates"], "axisymmetric": bool(symmetric),
                        **diag}
         return Placement(R, np.asarray(t, dtype=np.float64), float(scale), scores, diagnostics)
-
-    def _down_at(self, uv, plane: Plane) -> np.ndarray:
-        """Image direction of 'down the table normal' at pixel ``uv``."""
-        p = plane.intersect(_ray(uv, self.K))[0]
-        if not np.all(np.isfinite(p)):
-            return np.array([0.0, 1.0])
-        a, b = project(np.stack([p, p + 0.05 * plane.normal]), self.K)
-        return _unit(a - b)
 
     @staticmethod
     def _upright(R, plane) -> bool:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from sr3d_cli.geometry.camera import project
 from sr3d_cli.geometry.plane import Plane
 
 TOUCH_PX = 2  # pixels between two outlines that still touch
@@ -19,16 +18,10 @@ REACH_SHARE = 0.5  # occluder pixels kept within this share of the object's size
 
 
 def down_direction(mask: np.ndarray, K: np.ndarray, plane: Plane) -> np.ndarray:
-    """Unit image direction (2,) of 'down the table normal' at the mask's centroid (image +y
-    when the table is not below the camera's view there)."""
+    """Unit image direction (2,) of 'down the table normal' at the mask's centroid
+    (:meth:`Plane.down_at`)."""
     ys, xs = np.nonzero(mask)
-    ray = np.array([(xs.mean() - K[0, 2]) / K[0, 0], (ys.mean() - K[1, 2]) / K[1, 1], 1.0])
-    p = plane.intersect(ray)
-    if not np.all(np.isfinite(p)):
-        return np.array([0.0, 1.0])
-    a, b = project(np.stack([p, p + 0.05 * plane.normal]), K)
-    d = a - b
-    return d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else np.array([0.0, 1.0])
+    return plane.down_at(np.array([xs.mean(), ys.mean()]), K)
 
 
 def _lowest(mask: np.ndarray, down: np.ndarray) -> float:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sr3d_cli.geometry.camera import depth_to_points, pixel_rays
+from sr3d_cli.geometry.camera import depth_to_points, pixel_rays, project
 
 
 @dataclass(frozen=True)
@@ -41,6 +41,16 @@ class Plane:
         rays = np.stack([(uv[:, 0] - K[0, 2]) / K[0, 0], (uv[:, 1] - K[1, 2]) / K[1, 1],
                          np.ones(len(uv))], axis=1)
         return self.intersect(rays)
+
+    def down_at(self, uv: np.ndarray, K: np.ndarray) -> np.ndarray:
+        """Unit image direction (2,) of 'down the table normal' at pixel ``uv`` (2,): image +y
+        where the pixel does not see the plane or the normal points along its ray."""
+        p = self.intersect_pixels(np.atleast_2d(uv), K)[0]
+        if not np.all(np.isfinite(p)):
+            return np.array([0.0, 1.0])
+        a, b = project(np.stack([p, p + 0.05 * self.normal]), K)
+        d = a - b
+        return d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else np.array([0.0, 1.0])
 
     def depth_image(self, shape: tuple[int, int], K: np.ndarray) -> np.ndarray:
         """Depth ``(H, W)`` float64 metres of the plane at every pixel (0 where not seen)."""

@@ -691,11 +691,9 @@ def _nearer(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, plane: Plane,
     on what shows tell how far down it stands."""
     best, most = fit, need - 1
     for f in nearer_factors(fit, occluders, K, plane, mask)[every::every]:
-        start = moved_nearer(fit, f, plane)
-        levels = len(fit.profile) - 2
-        radii = np.interp(np.linspace(0, 1, levels), start.profile[1:-1, 1],
-                          start.profile[1:-1, 0]) * start.height
-        model = _Model(start.base.copy(), start.axis.copy(), start.height, radii)
+        start = moved_nearer(fit, f, plane)  # levels evenly spaced, as many as the fit's
+        model = _Model(start.base.copy(), start.axis.copy(), start.height,
+                       start.profile[1:-1, 0] * start.height)
         model, iou = _fit(model, mask, K, plane, "standing", iterations, occluders=occluders)
         found = _result(model, "standing", iou)
         count = on_surface(found)

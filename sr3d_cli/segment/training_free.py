@@ -533,6 +533,10 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         xs, ys, raw = (r[mask[readings[1], readings[0]]] for r in readings)
         return 0 if found is None else raw_support(found, xs, ys, raw, K, mask.shape, DEPTH_BAND)
 
+    def readings_in(mask: np.ndarray) -> int:
+        """How many of the region's readings lie in ``mask``."""
+        return int(mask[readings[1], readings[0]].sum())
+
     def margin() -> float:
         return max(DEPTH_MIN_POINTS, SPLIT_READINGS * whole_on)
 
@@ -544,7 +548,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         on_front, in_back = 0, 0
         if readings is not None:
             on_front = on_surface(f_front, front)
-            in_back = int(back[readings[1], readings[0]].sum())
+            in_back = readings_in(back)
         area = front.sum() + back.sum()
         by_outline = i < grouped and f_front.iou > whole.iou and \
             (f_front.iou * front.sum() + back.sum()) / area >= whole.iou + gain and \
@@ -565,8 +569,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
                     if hidden is not None and (f_front is None or stands_behind(
                             hidden, f_front, front & fit_silhouette(hidden, K, region.shape),
                             K, plane)) and (readings is None or on_surface(hidden, back) >=
-                                            HIDDEN_READINGS * back[readings[1],
-                                                                   readings[0]].sum()):
+                                            HIDDEN_READINGS * readings_in(back)):
                         f_back = hidden
                 return (f_front, f_back) if front is a else (f_back, f_front)
         return fit(a), fit(b)
