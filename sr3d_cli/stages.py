@@ -69,7 +69,7 @@ def frame_plane(frame: Frame, ids: np.ndarray, plane_cfg) -> tuple[Plane | None,
         return None, str(exc)
 
 
-OPEN_SUFFIX = "_open.ply"  # meshes/<frame>/<k>_open.ply: the object with an unseen end open
+OPEN_SUFFIX = "_open.ply"  # meshes/<frame>/<k>_open.ply: the object opened at a likely mouth
 
 
 def mesh_path(source: SceneSource, frame_id: str, obj_id: int, suffix: str = ".ply"):
@@ -137,7 +137,7 @@ def load_mesh(path) -> trimesh.Trimesh:
 
 
 def _open_alternative(path) -> trimesh.Trimesh | None:
-    """The object opened at an end the camera cannot see (``open_alternative`` in
+    """The object opened where its mouth likely is (``open_alternative`` in
     meshes/<frame>/<k>.json, in the mesh's own object frame), if reconstruct wrote one."""
     try:
         meta = json.loads(path.with_suffix(".json").read_text(encoding="utf-8"))
@@ -255,10 +255,12 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
                         clouds[k] = (mesh_cloud(mesh, T, scale, k, cfg.mesh_points, seed=k),
                                      place_points(mesh.vertices, T, scale)[mesh.faces])
                 targets[k], surfaces[k] = in_view(placed[k][0], K, depth.shape), placed[k][1]
-            # where the closed model gives no grasp: the same scene with the object opened
+            # where the closed model gives no grasp: the same scene with the object opened,
+            # its depth left out (rendered from the closed model, it holds the lid on a mouth
+            # that faces the camera)
             for k, (cloud, triangles) in opened.items():
                 others = [c for j, (c, _) in placed.items() if j != k]
-                fallbacks[k] = (Cloud.concat([scene] + others + [cloud]),
+                fallbacks[k] = (Cloud.concat([scene.select(scene.labels != k)] + others + [cloud]),
                                 in_view(cloud, K, depth.shape), triangles)
             scene = Cloud.concat([scene] + [c for c, _ in placed.values()])
         if only is not None:

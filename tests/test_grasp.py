@@ -582,3 +582,66 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
     own, _ = Planner(Config().grasp).plan(scene, {1: target}, PLANE)
     offered, _ = Planner(Config().grasp).plan(scene, {1: target}, PLANE, None, fallback)
     assert len(own) and np.array_equal(own.to_array(), offered.to_array())
+
+
+def test_the_open_fallback_is_planned_without_the_closed_models_depth(tmp_path):
+    """A beaker 10.4 cm across lying with its mouth turned 40 deg from the camera, its model
+    kept closed (the readings did not open it) with the fallback opened at the mouth. The
+    repaired depth, rendered from the closed model, shows the lid over the mouth: the grasp
+    stage plans the fallback without the object's own depth, whose lid points every pinch
+    of the rim met (study seed 3100 scene 14: no grasp). The best grasp pinches the wall at
+    the mouth and holds the true open beaker."""
+    from sr3d_cli.config import IOConfig
+    from sr3d_cli.geometry.camera import Camera
+    from sr3d_cli.geometry.transforms import place_points
+    from sr3d_cli.io.atomic import write_json, write_png
+    from sr3d_cli.io.formats import discover_scenes
+    from sr3d_cli.io.images import write_depth
+    from sr3d_cli.render import RenderMesh, make_renderer
+    from sr3d_cli.stages import grasp_frame, load_grasps
+    from tests.scenes import K_TABLE, table, table_point
+
+    plane = table()
+    r, h = 0.052, 0.09
+    outer = [(0, 0), (r, 0), (r, h - 0.003), (1.04 * r, h)]
+    toward = plane.project_direction(np.array([0.0, 0, -1.0]))
+    toward /= np.linalg.norm(toward)
+    a = np.radians(40)
+    axis = np.cos(a) * toward + np.sin(a) * np.cross(plane.normal, toward)  # base -> mouth
+    x = np.cross(plane.normal, axis)
+    base = table_point(plane, 0.0, 0.05) + 1.04 * r * plane.normal - 0.5 * h * axis
+    T = make_T(np.stack([x, np.cross(axis, x), axis], axis=1), base)
+    closed = revolve(np.asarray(outer + [(0, h)]) / h)
+    opened = revolve(open_vessel(outer, 0.002, 0.004) / h)
+    camera = Camera(K_TABLE, 640, 480)
+    drawn = make_renderer("numpy").render(
+        [RenderMesh(place_points(closed.vertices, T, h), np.asarray(closed.faces), 1)], camera)
+    depth = np.where(drawn.ids == 1, drawn.depth, plane.depth_image((480, 640), K_TABLE))
+    scene, out = tmp_path / "scene", tmp_path / "out"
+    write_json(scene / "camera.json", {"K": K_TABLE.tolist(), "width": 640, "height": 480,
+                                       "depth_scale": 0.001})
+    write_png(scene / "rgb" / "000000.png", np.zeros((480, 640, 3), np.uint8))
+    write_depth(scene / "depth" / "000000.png", depth, 0.001)
+    write_png(out / "masks" / "000000.png", drawn.ids.astype(np.uint16))
+    write_json(out / "masks" / "000000.json", {"objects": [{"id": 1, "label": "beaker"}]})
+    (out / "meshes" / "000000").mkdir(parents=True)
+    closed.export(out / "meshes" / "000000" / "1.ply")
+    opened.export(out / "meshes" / "000000" / "1_open.ply")
+    write_json(out / "meshes" / "000000" / "1.json", {"open_alternative": "1_open.ply"})
+    write_json(out / "poses" / "000000.json",
+               {"objects": [{"id": 1, "mesh": "meshes/000000/1.ply", "T_cam_obj": T.tolist(),
+                             "scale": h}], "failed": [], "plane": plane.to_json()})
+    write_depth(out / "repaired" / "000000.png", depth, 0.001)
+    source, = discover_scenes(scene, IOConfig(), out)
+    cfg = Config()
+    count, messages = grasp_frame(source.load_frame("000000"), Planner(cfg.grasp), cfg.plane)
+    assert count > 0 and not messages, messages
+    grasps = load_grasps(source, "000000").sorted()
+    assert np.all(grasps.widths < 0.02)  # across the wall
+    mouth = base + h * axis
+    assert np.linalg.norm(grasps.t[0] - mouth) < 1.1 * r  # at the mouth's rim
+    true = opened.copy()
+    true.vertices = place_points(opened.vertices, T, h)
+    truth = TrueScene.build([(1, true)], np.zeros((0, 3)), plane)
+    record = judge(grasps.take(slice(0, 1)), truth, GRIPPER)[0]
+    assert record["reason"] == "ok" and record["mu"] <= 0.5, record

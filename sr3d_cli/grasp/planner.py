@@ -15,9 +15,9 @@ with the friction their exact contacts on it need (the jaws closed onto its tria
 evaluator closes them on a true mesh), the worst of the grasp as planned and moved
 ``height_tolerance`` either way along the mesh's height axis. An object where nothing holds
 (with a placed mesh: whose best grasp's exact contacts do not hold) gets other seed points
-(``redraws``). An object given a fallback (a lying vessel's model opened at the end the camera
-cannot see, :func:`sr3d_cli.reconstruct.unseen_mouth`) is planned on it where its own gives no
-grasp.
+(``redraws``). An object given a fallback (a lying vessel's model opened at its wider end,
+:func:`sr3d_cli.reconstruct.unseen_mouth`) is planned on it, without the object's own depth
+(rendered from the closed model), where its own model gives no grasp.
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
@@ -144,7 +144,7 @@ class Planner:
         triangles (m, 3, 3) of objects that have one; their best grasps are scored again with
         the jaws closed exactly on it (:meth:`_rescore`). ``fallbacks``: (scene, target,
         triangles) to plan an object on where its own give no grasp (a lying vessel opened at
-        the end the camera cannot see). ``axes``: a placed mesh's height axis (camera frame),
+        its wider end). ``axes``: a placed mesh's height axis (camera frame),
         along which its fitted height may be off (default: the table normal). Returns (grasps,
         object messages)."""
         sets, messages = [], []
