@@ -18,9 +18,9 @@ from sr3d_cli.geometry.camera import project
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.geometry.transforms import apply_T, place_points
-from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, RevolutionFit, fit_revolution,
-                                                 off_table_readings, raw_support, smoothed,
-                                                 straight_walls)
+from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, RevolutionFit, carved,
+                                                 fit_revolution, off_table_readings, raw_support,
+                                                 smoothed, straight_walls)
 
 BASE_SHARE = 0.15  # of the height: the profile's lowest part, whose widest ring is the base
 MIN_AXIS_PX = 10  # pixels the projected axis must span for its upper half to be told apart
@@ -140,7 +140,7 @@ def mouths(fit: RevolutionFit, cfg: ReconstructConfig) -> list[RevolutionFit]:
     ends = [(fit, r[-1])] if fit.resting == "standing" else \
         [(fit.flipped(), r[0]), (fit, r[-1])]
     return [replace(f, profile=open_vessel(f.profile[:-1], cfg.open_wall / f.height,
-                                           cfg.open_base / f.height))
+                                           f.solid_below + cfg.open_base / f.height))
             for f, end in ends if end >= cfg.open_top_ratio * r.max()]
 
 
@@ -230,6 +230,8 @@ class Reconstructor:
             name, mesh = self.library.pick(label, fit.profile)
             meta["library_mesh"] = name
             return Reconstruction(mesh, meta)
+        if depth is not None and cfg.use_depth:
+            fit = carved(fit, mask, depth, K)
         fit = straight_walls(smoothed(fit, cfg.smooth), cfg.straight_wall)
         mouth = open_mouth(fit, cfg, mask, K, plane, depth)
         if mouth is not None:
