@@ -21,7 +21,8 @@ from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, profile_from_mesh, revolve, silhouette
 from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.io.formats import discover_scenes
-from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_border, check_mask
+from sr3d_cli.reconstruct import (ObjectError, Reconstructor, check_border, check_mask,
+                                   revolution_fit)
 from sr3d_cli.reconstruct.revolution_fit import (RevolutionFit, _resting_tilt, axial_view_angle,
                                                  carved, fit_revolution, smoothed,
                                                  straight_walls)
@@ -187,6 +188,27 @@ def test_lying_bottle_recovered_with_its_base_at_the_wide_end():
     assert fit.axis @ axis > 0  # base at the wide end
     truth = revolve(prof / 0.22)
     assert chamfer_distance(revolve(fit.profile), truth) < 0.05
+
+
+@pytest.mark.parametrize("length", [0.06, 0.065])
+def test_a_lying_beaker_as_long_as_it_is_wide_is_found_lying(length, monkeypatch):
+    """Laid across the view, a 7 cm wide beaker about as long draws a near-square outline whose
+    major axis and orientation say nothing of its axis; started only along that major axis, the
+    lying fit turned across the true axis and lost to a squat standing one."""
+    plane = _table(45.0, 0.55)
+    axis = np.array([1.0, 0, 0]) - (np.array([1.0, 0, 0]) @ plane.normal) * plane.normal
+    axis = axis / np.linalg.norm(axis)
+    r = 0.035
+    prof = np.array([[0, 0], [r, 0], [r, length], [0, length]])
+    base = plane.intersect(np.array([-0.02, 0.02, 1.0])) + r * plane.normal - 0.5 * length * axis
+    mask = _render(prof, base, axis)
+    fit = fit_revolution(mask, K, plane)
+    # measured: IoU .996 / .926, height 60 / 71 mm, axis 0 / 8 deg off
+    assert fit.resting == "lying" and fit.iou > 0.9
+    assert fit.height == pytest.approx(length, rel=0.1)
+    assert np.degrees(np.arccos(abs(fit.axis @ axis))) < 10
+    monkeypatch.setattr(revolution_fit, "SQUARE_OUTLINE", 0.0)  # started along the major axis
+    assert fit_revolution(mask, K, plane).resting == "standing"
 
 
 GOBLET = np.array([[0, 0], [0.025, 0], [0.025, 0.004], [0.005, 0.006], [0.005, 0.08],

@@ -34,6 +34,7 @@ DEPTH_MIN_POINTS = 30  # fewest readings on a surface that count as evidence
 DEPTH_SAMPLES = 400  # readings of a mask weighed against fitted surfaces (evenly spread)
 TOP_SHARE = 0.25  # a straight top's height: where the outline is this share of its widest
 NEARER_REACH = 0.2  # share nearer than its outline says a solid whose foot is hidden may stand
+SQUARE_OUTLINE = 1.5  # below this elongation the outline's major axis is no lying solid's
 
 
 @dataclass
@@ -175,10 +176,11 @@ def _widths(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: str,
          iterations: int, tilt: bool = False, keep_radii: bool = False,
-         occluders: np.ndarray | None = None) -> tuple[_Model, float]:
+         occluders: np.ndarray | None = None, turn: bool = True) -> tuple[_Model, float]:
     """Refine ``model`` so that its silhouette matches ``mask``; returns (model, IoU). A lying
     model's axis stays parallel to the plane, or with ``tilt`` rests on its hull
-    (:func:`_rest_on_hull`). With ``keep_radii`` only the ends and the position move, and the
+    (:func:`_rest_on_hull`) and, with ``turn``, turns in the plane as the outline's orientation
+    says. With ``keep_radii`` only the ends and the position move, and the
     top end is matched where the outline is ``TOP_SHARE`` of its widest (a row or two of
     segmentation spill above a rim would pull a straight top up). On the ``occluders``'
     pixels (see :class:`_Frame`) the mask takes whatever the model draws."""
@@ -232,7 +234,7 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             model.height = max(model.height + step[0] + step[1], 1e-3)
             # turn the axis in the plane until the silhouette's orientation matches
             d_img = _orientation(obs) - _orientation(ren)
-            if abs(d_img) > 1e-3:
+            if turn and abs(d_img) > 1e-3:
                 turned = rotation_about(n, 0.05) @ model.axis
                 tip = model.base + model.height * turned
                 p = frame.point(project(np.stack([model.base, tip]), K))
@@ -395,8 +397,12 @@ def _init_standing(mask, K, plane, levels) -> _Model | None:
     return _Model(base, n.copy(), height, np.full(levels, r))
 
 
-def _init_lying(mask, K, plane, levels) -> _Model | None:
+def _init_lying(mask, K, plane, levels, across_major: bool = False) -> _Model | None:
+    """A lying cylinder along the outline's major axis (or, ``across_major``, its minor one:
+    a lying vessel about as long as it is wide has no telling major axis)."""
     centre, major, _ = _principal(mask)
+    if across_major:
+        major = np.array([-major[1], major[0]])
     ys, xs = np.nonzero(mask)
     along = (xs - centre[0]) * major[0] + (ys - centre[1]) * major[1]
     across = -(xs - centre[0]) * major[1] + (ys - centre[1]) * major[0]
@@ -857,14 +863,26 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         above = int((heights > top_height(fit, plane) + depth_band).sum())
         return above >= max(depth_min_points, refute_share * len(readings))
 
+    # (across the major axis, turned by the outline's orientation) of each lying start: a
+    # near-square outline's major axis and orientation say nothing of a lying solid's axis
+    # (a beaker as long as it is wide), so there it starts both ways, turned or not
+    square = _principal(mask)[2] < SQUARE_OUTLINE
+    lying_starts = [(False, True), *([(True, True), (True, False), (False, False)] * square)]
     fits = []  # (score, fit, readings on its surface when already counted)
-    for resting, init in (("standing", _init_standing), ("lying", _init_lying)):
+    for resting in ("standing", "lying"):
         if resting == "lying" and not allow_lying:
             continue
-        model = init(mask, K, plane, levels)
-        if model is None:
+        tried = []
+        for across, turn in (lying_starts if resting == "lying" else [(False, True)]):
+            model = _init_lying(mask, K, plane, levels, across) if resting == "lying" else \
+                _init_standing(mask, K, plane, levels)
+            if model is not None:
+                tried.append((*_fit(model, mask, K, plane, resting, iterations,
+                                    occluders=occluders, turn=turn), (across, turn)))
+        if not tried:
             continue
-        model, iou = _fit(model, mask, K, plane, resting, iterations, occluders=occluders)
+        model, iou, start = max(tried, key=lambda t: t[1])
+        lying_start = start if resting == "lying" else (False, True)
         fit, count = _result(model, resting, iou), None
         if resting == "standing":
             straight = _straight_top(model, mask, K, plane, iterations, occluders)
@@ -895,10 +913,10 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     if best.resting == "lying":
         # decided flat (a tilt would let the lying fit take short standing vessels); from its
         # own start, since the flat fit's radii hold the tilt as a taper
-        start = _init_lying(mask, K, plane, levels)
+        start = _init_lying(mask, K, plane, levels, lying_start[0])
         if start is not None:
             model, iou = _fit(start, mask, K, plane, "lying", iterations, tilt=True,
-                              occluders=occluders)
+                              occluders=occluders, turn=lying_start[1])
             if iou >= best.iou - tilt_tolerance:
                 best = _result(model, "lying", iou)
     if readings is not None and occluders is not None and best.resting == "standing":
