@@ -866,8 +866,10 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
 
     # (across the major axis, turned by the outline's orientation) of each lying start: a
     # near-square outline's major axis and orientation say nothing of a lying solid's axis
-    # (a beaker as long as it is wide), so there it starts both ways, turned or not
-    square = _principal(mask)[2] < SQUARE_OUTLINE
+    # (a beaker as long as it is wide), so there it starts both ways, turned or not; not where
+    # an object in front may cut the outline (the top of a glass behind another, a near-square
+    # that a lying fit drew better than the standing one, which the readings then chose)
+    square = _principal(mask)[2] < SQUARE_OUTLINE and (occluders is None or not occluders.any())
     lying_starts = [(False, True), *([(True, True), (True, False), (False, False)] * square)]
     fits = []  # (score, fit, readings on its surface when already counted)
     for resting in ("standing", "lying"):
