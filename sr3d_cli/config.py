@@ -136,7 +136,7 @@ class GraspConfig:
     seeds: int = 64
     seed_bins: int = 12
     seed: int = 0
-    redraws: int = 2
+    redraws: int = 6
     height_tolerance: float = 0.004
     approaches: int = 7
     pair_radius: float = 0.004

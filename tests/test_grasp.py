@@ -241,7 +241,7 @@ def test_an_object_with_nothing_held_draws_other_seed_points():
     target = mesh_cloud(beaker, np.eye(4), 1.0, 1, 2400)
     scene = Cloud.concat([_table_cloud(), target])
     held = {}
-    for redraws in (0, 2):
+    for redraws in (0, 2, 6):
         held[redraws] = set()
         for seed in range(10):
             cfg = Config().grasp
@@ -253,9 +253,9 @@ def test_an_object_with_nothing_held_draws_other_seed_points():
                              GRIPPER)[0]["reason"] == "ok"
             else:
                 assert messages and "no collision-free grasp" in messages[0]
-    # measured: 3 of 10 seeds hold with one draw, 5 of 10 with up to three
-    assert held[0] < held[2]
-    assert len(held[2]) - len(held[0]) >= 2
+    # measured: 2 of 10 seeds hold with one draw, 7 with up to three, 9 with up to seven
+    assert held[0] < held[2] < held[6]
+    assert len(held[6]) - len(held[0]) >= 5
 
 
 def _stemmed_block() -> trimesh.Trimesh:
