@@ -803,7 +803,8 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
                    refute_share: float = 0.25, tilt_tolerance: float = 0.01,
                    straight_top_gap: float = 0.005,
                    openings: Callable[[RevolutionFit], list[RevolutionFit]] | None = None,
-                   occluders: np.ndarray | None = None) -> RevolutionFit:
+                   occluders: np.ndarray | None = None,
+                   square_starts: bool = True) -> RevolutionFit:
     """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
 
     Standing and lying are both fitted; the better silhouette wins, lying only by
@@ -839,6 +840,9 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     standing one (seed-1500 study: a 12.6 cm beaker laid down, 29 readings against the lying
     fit's 70; opened, 214). A standing winner's hidden levels are then straightened where its
     profile only narrows upwards (:func:`straightened`).
+    A lying fit starts along the outline's major axis, turning as its orientation says; with
+    ``square_starts``, a near-square outline (elongation below :data:`SQUARE_OUTLINE`) that no
+    ``occluders`` touch also starts across it, and both without turning: the best IoU wins.
     ``occluders`` (H, W) bool are the pixels of objects in front that may hide this one: the
     outline is compared with the fits elsewhere only (see :class:`_Frame`). A standing winner
     whose foot they hide is then moved nearer (:func:`nearer_factors`) where ``depth_vote``
@@ -869,7 +873,8 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     # (a beaker as long as it is wide), so there it starts both ways, turned or not; not where
     # an object in front may cut the outline (the top of a glass behind another, a near-square
     # that a lying fit drew better than the standing one, which the readings then chose)
-    square = _principal(mask)[2] < SQUARE_OUTLINE and (occluders is None or not occluders.any())
+    square = square_starts and _principal(mask)[2] < SQUARE_OUTLINE and \
+        (occluders is None or not occluders.any())
     lying_starts = [(False, True), *([(True, True), (True, False), (False, False)] * square)]
     fits = []  # (score, fit, readings on its surface when already counted)
     for resting in ("standing", "lying"):
