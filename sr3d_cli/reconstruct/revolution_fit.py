@@ -875,7 +875,8 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     # that a lying fit drew better than the standing one, which the readings then chose)
     square = square_starts and _principal(mask)[2] < SQUARE_OUTLINE and \
         (occluders is None or not occluders.any())
-    lying_starts = [(False, True), *([(True, True), (True, False), (False, False)] * square)]
+    lying_starts = [(False, True)] + ([(True, True), (True, False), (False, False)] if square
+                                      else [])
     fits = []  # (score, fit, readings on its surface when already counted)
     for resting in ("standing", "lying"):
         if resting == "lying" and not allow_lying:
