@@ -877,6 +877,7 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         (occluders is None or not occluders.any())
     lying_starts = [(False, True)] + ([(True, True), (True, False), (False, False)] if square
                                       else [])
+    lying_start = lying_starts[0]  # the one the lying fit won from (its tilted refit's too)
     fits = []  # (score, fit, readings on its surface when already counted)
     for resting in ("standing", "lying"):
         if resting == "lying" and not allow_lying:
@@ -891,7 +892,8 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         if not tried:
             continue
         model, iou, start = max(tried, key=lambda t: t[1])
-        lying_start = start if resting == "lying" else (False, True)
+        if resting == "lying":
+            lying_start = start
         fit, count = _result(model, resting, iou), None
         if resting == "standing":
             straight = _straight_top(model, mask, K, plane, iterations, occluders)
