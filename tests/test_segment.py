@@ -185,6 +185,31 @@ def test_a_vial_against_a_glass_is_split_by_the_readings_but_a_goblet_or_bottle_
         assert len(split_touching(ids > 0, K, plane, depth=sparse(depth))) == 1
 
 
+@pytest.mark.parametrize("aside, ahead", [(0.05, -0.04), (0.045, -0.05)])
+def test_a_small_vial_against_a_tall_bottle_is_split_by_its_own_readings(aside, ahead, monkeypatch):
+    """A 5.5 cm vial in front of a 26 cm bottle's side: one region, of which the vial is under
+    4%, so it gets fewer than 30 of the region's 400 sampled readings and the parts cannot gain
+    a quarter of the whole's count. Its own readings can still tell: the whole's fit misses
+    them and the vial's fit holds them (``OWN_READINGS``). The bottle's neck, a thin part too,
+    stays with the bottle (it was left to neither part: bottle IoU .885)."""
+    from sr3d_cli.segment import training_free
+    from sr3d_cli.segment.training_free import split_touching
+
+    bottle = [[0, 0], [0.045, 0], [0.045, 0.16], [0.015, 0.21], [0.015, 0.26], [0, 0.26]]
+    vial = [[0, 0], [0.009, 0], [0.009, 0.045], [0.007, 0.05], [0.007, 0.055], [0, 0.055]]
+    ids, K, plane, depth = solids_on_table([(bottle, 0.26, 0.0, 0.0), (vial, 0.055, aside, ahead)])
+    region = ids > 0
+    assert cv2.connectedComponents(region.astype(np.uint8))[0] == 2  # one region
+    assert (ids == 2).sum() < 0.04 * region.sum()
+    sparse = np.where(np.random.default_rng(0).random(depth.shape) < 0.3, depth, 0.0)
+    parts = split_touching(region, K, plane, depth=sparse)
+    assert len(parts) == 2
+    ious = instance_ious(np.argmax(np.stack([np.zeros_like(region)] + parts), 0), ids)
+    assert min(ious.values()) > 0.95
+    monkeypatch.setattr(training_free, "OWN_READINGS", 1.01)  # no part can hold more than all
+    assert len(split_touching(region, K, plane, depth=sparse)) == 1
+
+
 @pytest.mark.parametrize("back", ["beaker", "flask"])
 def test_one_object_behind_another_is_split_where_their_readings_stand(back):
     """A beaker or a tall flask straight behind a flask, their outlines filled to one convex

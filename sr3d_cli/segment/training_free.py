@@ -43,6 +43,7 @@ SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (split
 SPLIT_READINGS = 0.25  # share of the whole's readings on its surface a split must add (ditto)
 SPLIT_PART_IOU = 0.85  # silhouette IoU both parts of a split made by the readings must reach
 HIDDEN_READINGS = 0.15  # share of its readings a part fitted with hidden pixels must explain
+OWN_READINGS = 0.5  # share of a part's own readings its fit must hold and the whole's miss
 FOOTPRINT_APART = 0.03  # metres between two groups of readings on the table (_footprint_cut)
 BORDER_REACH = 0.1  # share of the image width along its sides where holes may be the
 # camera's own (a stereo camera's invalid left band is baseline x fx / depth wide: ~100 px at
@@ -369,6 +370,18 @@ def _attachments(region: np.ndarray, min_area: int) -> tuple[np.ndarray, list[np
     return body, [labels == k for k in range(1, count) if stats[k, 4] >= min_area]
 
 
+def _bridge(region: np.ndarray, body: np.ndarray, thin: list[np.ndarray], part: np.ndarray
+            ) -> np.ndarray:
+    """The pixels that join a thin ``part`` to the ``body`` (see :func:`_attachments`): those of
+    the region in neither the body nor a thin part, in pieces that touch ``part``. Cut off with
+    the part, they go with neither side; the other thin parts (a bottle's neck beside a vial)
+    stay with the body."""
+    loose = region & ~body & ~np.any(thin, axis=0)
+    count, labels = cv2.connectedComponents(loose.astype(np.uint8), connectivity=8)
+    touching = np.unique(labels[(cv2.dilate(part.astype(np.uint8), _disk(1)) > 0) & loose])
+    return np.isin(labels, touching[touching > 0])
+
+
 def _nearest_seed(seeds: np.ndarray) -> np.ndarray:
     """Every pixel's nearest non-zero label of ``seeds`` (H, W)."""
     iy, ix = ndimage.distance_transform_edt(seeds == 0, return_distances=False,
@@ -509,7 +522,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             cuts.append(cut)
         body, thin = _attachments(region, min_area)
         if thin and cv2.connectedComponents(body.astype(np.uint8), connectivity=8)[0] == 2:
-            cuts += [(a, body) for a in thin]
+            cuts += [(a, region & ~a & ~_bridge(region, body, thin, a)) for a in thin]
     if not cuts:
         return [region]
 
@@ -543,6 +556,29 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     def margin() -> float:
         return max(DEPTH_MIN_POINTS, SPLIT_READINGS * whole_on)
 
+    def own_share(found, mask: np.ndarray) -> float | None:
+        """The share of the part's own readings (up to ``DEPTH_SAMPLES`` of them: a small
+        object gets few of the region's sample) on the fit's surface; None with fewer than
+        ``DEPTH_MIN_POINTS``."""
+        inside = mask[every[1], every[0]]
+        xs, ys, raw = evenly(tuple(r[inside] for r in every), DEPTH_SAMPLES)
+        if len(xs) < DEPTH_MIN_POINTS:
+            return None
+        return 0.0 if found is None else \
+            raw_support(found, xs, ys, raw, K, mask.shape, DEPTH_BAND) / len(xs)
+
+    def misses(mask: np.ndarray) -> bool:
+        """Whether a fit of the part could hold :data:`OWN_READINGS` of its own readings
+        more than the whole's fit does (see :func:`holds_own`)."""
+        on_whole = own_share(whole, mask)
+        return on_whole is not None and on_whole <= 1 - OWN_READINGS
+
+    def holds_own(found, mask: np.ndarray) -> bool:
+        """Whether the part's fit holds :data:`OWN_READINGS` of the part's own readings more
+        than the whole's fit does."""
+        on_whole = own_share(whole, mask)
+        return on_whole is not None and own_share(found, mask) - on_whole >= OWN_READINGS
+
     def could_hold(i: int, front: np.ndarray, f_front, back: np.ndarray) -> bool:
         """Whether cut ``i`` could hold with the best fit of ``back`` there can be (IoU 1, all
         its readings on it): if not, fitting it again with hidden pixels changes nothing."""
@@ -556,9 +592,10 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         by_outline = i < grouped and f_front.iou > whole.iou and \
             (f_front.iou * front.sum() + back.sum()) / area >= whole.iou + gain and \
             (readings is None or on_front + in_back > whole_on - margin())
-        return by_outline or (readings is not None and f_front.iou >= SPLIT_PART_IOU and
-                              min(on_front, in_back) >= DEPTH_MIN_POINTS and
-                              on_front + in_back >= whole_on + margin())
+        return by_outline or (readings is not None and f_front.iou >= SPLIT_PART_IOU and (
+            min(on_front, in_back) >= DEPTH_MIN_POINTS and
+            on_front + in_back >= whole_on + margin() or
+            on_front >= (1 - SPLIT_READINGS) * on_surface(whole, front) and misses(back)))
 
     def fit_parts(i: int, a: np.ndarray, b: np.ndarray):
         """Both parts' fits. A part behind the other (:func:`in_front`) is fitted with the
@@ -594,16 +631,20 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         ia, ib = (f.iou if f is not None else -1.0 for f in (fa, fb))
         mean = (ia * a.sum() + ib * b.sum()) / (a.sum() + b.sum())
         by_outline = i < grouped and min(ia, ib) > whole.iou and mean >= whole.iou + gain
-        by_readings, score = False, mean
+        by_readings, by_count, score = False, False, mean
         if readings is not None:
             sa, sb = on_surface(fa, a), on_surface(fb, b)
-            by_readings = (min(ia, ib) >= SPLIT_PART_IOU and min(sa, sb) >= DEPTH_MIN_POINTS
-                           and sa + sb >= whole_on + margin())
+            by_count = (min(ia, ib) >= SPLIT_PART_IOU and min(sa, sb) >= DEPTH_MIN_POINTS
+                        and sa + sb >= whole_on + margin())
+            # a small part's own readings (ranked below a cut the region's count holds)
+            by_readings = by_count or min(ia, ib) >= SPLIT_PART_IOU and mean >= whole.iou and \
+                any(holds_own(f, part) and s_other >= (1 - SPLIT_READINGS) * on_surface(
+                    whole, other) for f, part, s_other, other in ((fa, a, sb, b), (fb, b, sa, a)))
             by_outline &= sa + sb > whole_on - margin()
             score = sa + sb if by_readings else mean
         if not (by_outline or by_readings):
             continue
-        key = (by_readings, i != footprint, score)
+        key = (by_readings, by_count, i != footprint, score)
         if best is None or key > best[0]:
             best = (key, ((a, fa), (b, fb)))
     if best is None:
