@@ -473,7 +473,12 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     :data:`SPLIT_READINGS` of the whole's count and at least ``DEPTH_MIN_POINTS``, with both
     parts fitting to :data:`SPLIT_PART_IOU` and holding that many readings each (a vial behind a
     glass draws a fine bottle: the bottle's neck misses the vial's readings; a part without
-    readings of its own is no object). Only the readings hold a thin attachment's or a footprint
+    readings of its own is no object). A small part gets few of the region's readings: a cut
+    also holds by them (ranked below the above) when one part's fit holds
+    :data:`OWN_READINGS` of that part's own readings more than the whole's fit does, the other
+    part's fit keeps all but :data:`SPLIT_READINGS` of the whole's readings on it, both fit to
+    :data:`SPLIT_PART_IOU` and
+    the outline gets no worse. Only the readings hold a thin attachment's or a footprint
     cut (the first may be as small as a sliver, the second follows the readings, not the
     outline). A cut the readings clearly refute (fewer on the parts by that much) does not hold
     by the outline. The best cut that holds wins (readings first; among those, a footprint cut
