@@ -477,9 +477,11 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     also holds by them (ranked below the above) when one part's fit holds
     :data:`OWN_READINGS` of that part's own readings more than the whole's fit does, the other
     part's fit keeps all but :data:`SPLIT_READINGS` of the whole's readings on it, both fit to
-    :data:`SPLIT_PART_IOU` and
-    the outline gets no worse. Only the readings hold a thin attachment's or a footprint
-    cut (the first may be as small as a sliver, the second follows the readings, not the
+    :data:`SPLIT_PART_IOU` and the outline gets no worse; and when the readings refute the
+    whole's fit on one part (:data:`SPLIT_READINGS` of them above its top) and neither part's,
+    both parts fitting to :data:`SPLIT_PART_IOU` and holding ``DEPTH_MIN_POINTS`` readings,
+    with the outline at most ``gain`` worse. Only the readings hold a thin attachment's or a
+    footprint cut (the first may be as small as a sliver, the second follows the readings, not the
     outline). A cut the readings clearly refute (fewer on the parts by that much) does not hold
     by the outline. The best cut that holds wins (readings first; among those, a footprint cut
     only where no other holds, its edge being only as fine as the readings) and each part is
@@ -495,7 +497,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS,
                                                      DEPTH_SAMPLES, evenly, fit_revolution,
                                                      fit_silhouette, off_table_readings,
-                                                     raw_support, stands_behind)
+                                                     raw_support, stands_behind, top_height)
 
     if rounds < 1:
         return [region]
@@ -584,6 +586,19 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         on_whole = own_share(whole, mask)
         return on_whole is not None and own_share(found, mask) - on_whole >= OWN_READINGS
 
+    def above(found, mask: np.ndarray) -> int:
+        """How many of the region's readings in ``mask`` stand more than ``DEPTH_BAND`` above
+        the fit's highest point: with the camera above the table, none can lie on it."""
+        xs, ys, raw = (r[mask[readings[1], readings[0]]] for r in readings)
+        heights = plane.height(unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K))
+        return int((heights > top_height(found, plane) + DEPTH_BAND).sum())
+
+    def refutes(part: np.ndarray) -> bool:
+        """Whether the readings refute the whole's fit on ``part``: :data:`SPLIT_READINGS` of
+        the part's readings (at least ``DEPTH_MIN_POINTS``) stand above it (a standing goblet
+        and a glass beside it drew a lying goblet, 11 cm high, under readings up to 16 cm)."""
+        return above(whole, part) >= max(DEPTH_MIN_POINTS, SPLIT_READINGS * readings_in(part))
+
     def could_hold(i: int, front: np.ndarray, f_front, back: np.ndarray) -> bool:
         """Whether cut ``i`` could hold with the best fit of ``back`` there can be (IoU 1, all
         its readings on it): if not, fitting it again with hidden pixels changes nothing."""
@@ -645,6 +660,11 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             by_readings = by_count or min(ia, ib) >= SPLIT_PART_IOU and mean >= whole.iou and \
                 any(holds_own(f, part) and s_other >= (1 - SPLIT_READINGS) * on_surface(
                     whole, other) for f, part, s_other, other in ((fa, a, sb, b), (fb, b, sa, a)))
+            # readings above the whole's fit and above neither part's (the outline may be a
+            # little worse: the whole's fit drew it with a shape the readings rule out)
+            by_readings = by_readings or min(ia, ib) >= SPLIT_PART_IOU and \
+                mean >= whole.iou - gain and min(sa, sb) >= DEPTH_MIN_POINTS and \
+                max(above(fa, a), above(fb, b)) < DEPTH_MIN_POINTS and (refutes(a) or refutes(b))
             by_outline &= sa + sb > whole_on - margin()
             score = sa + sb if by_readings else mean
         if not (by_outline or by_readings):
