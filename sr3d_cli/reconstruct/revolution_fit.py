@@ -637,6 +637,12 @@ def top_height(fit: RevolutionFit, plane: Plane) -> float:
     return float((centres + fit.profile[:, 0] * fit.height * across).max())
 
 
+def above_top(fit: RevolutionFit, heights: np.ndarray, plane: Plane, band: float) -> int:
+    """How many readings (``heights`` above ``plane``, metres) stand more than ``band`` above
+    the fit's highest point: with the camera above the table, none of them can lie on it."""
+    return int((heights > top_height(fit, plane) + band).sum())
+
+
 def axial_view_angle(mask: np.ndarray, K: np.ndarray, plane: Plane) -> float:
     """Degrees between the table normal and the camera ray to the mask's centroid: near 0,
     the camera looks down a standing object's axis and its outline says almost nothing about
@@ -865,8 +871,8 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
         """Enough readings lie above the fit's highest point to rule it out."""
         if readings is None:
             return False
-        above = int((heights > top_height(fit, plane) + depth_band).sum())
-        return above >= max(depth_min_points, refute_share * len(readings))
+        return above_top(fit, heights, plane, depth_band) >= \
+            max(depth_min_points, refute_share * len(readings))
 
     # (across the major axis, turned by the outline's orientation) of each lying start: a
     # near-square outline's major axis and orientation say nothing of a lying solid's axis

@@ -497,7 +497,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS,
                                                      DEPTH_SAMPLES, evenly, fit_revolution,
                                                      fit_silhouette, off_table_readings,
-                                                     raw_support, stands_behind, top_height)
+                                                     raw_support, stands_behind, above_top)
 
     if rounds < 1:
         return [region]
@@ -518,6 +518,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     if depth is not None:
         every = off_table_readings(region, depth, K, plane, samples=int(area))
         readings = evenly(every, DEPTH_SAMPLES)  # as fit_revolution samples them
+        heights = plane.height(unproject(np.column_stack(readings[:2]).astype(np.float64),
+                                         readings[2], K))  # above the table, metres
         if len(readings[0]) < DEPTH_MIN_POINTS:
             readings = None
     grouped = len(cuts)  # cuts past this one the readings made: only readings hold them
@@ -587,11 +589,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         return on_whole is not None and own_share(found, mask) - on_whole >= OWN_READINGS
 
     def above(found, mask: np.ndarray) -> int:
-        """How many of the region's readings in ``mask`` stand more than ``DEPTH_BAND`` above
-        the fit's highest point: with the camera above the table, none can lie on it."""
-        xs, ys, raw = (r[mask[readings[1], readings[0]]] for r in readings)
-        heights = plane.height(unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K))
-        return int((heights > top_height(found, plane) + DEPTH_BAND).sum())
+        """How many of the region's readings in ``mask`` stand above the fit (:func:`above_top`)."""
+        return above_top(found, heights[mask[readings[1], readings[0]]], plane, DEPTH_BAND)
 
     def refutes(part: np.ndarray) -> bool:
         """Whether the readings refute the whole's fit on ``part``: :data:`SPLIT_READINGS` of
