@@ -64,6 +64,17 @@ def test_raycast_hits_a_triangle_where_expected():
     assert np.isinf(dist[1]) and face[1] == -1
 
 
+def test_the_grippers_lowest_point_is_its_lowest_corner():
+    rng = np.random.default_rng(3)
+    R = np.linalg.qr(rng.normal(size=(50, 3, 3)))[0]
+    t = rng.normal(0, 0.1, (50, 3)) + [0, 0, 0.5]
+    w, d = rng.uniform(0.01, 0.08, 50), rng.uniform(0.0, 0.04, 50)
+    corners = np.einsum("nij,nkj->nki", R, GRIPPER.corners(w, d)) + t[:, None]
+    expected = PLANE.height(corners.reshape(-1, 3)).reshape(50, 24).min(1)
+    assert np.allclose(GRIPPER.lowest(R, t, w, d, PLANE), expected, atol=1e-12)
+    assert GRIPPER.lowest(R[0], t[0], w[0], d[0], PLANE) == pytest.approx(expected[0])
+
+
 def test_box_is_grasped_across_its_width():
     box = _on_table(trimesh.creation.box(extents=(0.05, 0.03, 0.08)))
     grasps, messages = _plan(box)

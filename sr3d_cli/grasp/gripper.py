@@ -58,15 +58,15 @@ class Gripper:
     def lowest(self, R: np.ndarray, t: np.ndarray, width, depth, plane) -> np.ndarray:
         """Height above ``plane`` of the lowest corner of each gripper (rotation ``R (..., 3,
         3)``, centre ``t (..., 3)``, opening ``width``, ``depth``): ``(...)``."""
-        up = np.einsum("...ij,i->...j", R, plane.normal)          # the table normal, grasp frame
-        return np.min(self.corners(width, depth) @ up[..., None], axis=(-2, -1)) + \
-            plane.height(t)
+        up = np.einsum("...ij,i->...j", R, plane.normal)[..., None, None, :]  # grasp frame
+        # a linear function's least over a box takes each coordinate at the end its sign picks
+        low = np.min(self.boxes(width, depth) * up, axis=-2).sum(-1).min(-1)
+        return low + plane.height(t)
 
     def finger_extent(self, R: np.ndarray, width, depth, direction: np.ndarray) -> np.ndarray:
         """How far the two fingers (of :meth:`boxes`) reach from each grasp centre along
         ``direction`` (camera frame), for rotations ``R (n, 3, 3)``, openings ``width`` and
-        ``depth`` ``(n,)``: ``(n,)``. A linear function's maximum over a box takes each
-        coordinate at the end its sign picks."""
+        ``depth`` ``(n,)``: ``(n,)`` (as :meth:`lowest`, by the sign of each coordinate)."""
         a = np.einsum("nij,i->nj", R, direction)[:, None, None, :]   # (n, 1, 1, 3) grasp frame
         fingers = self.boxes(width, depth)[:, :2]                    # (n, 2, 2, 3)
         return np.max(fingers * a, axis=2).sum(-1).max(1)

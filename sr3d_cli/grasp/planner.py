@@ -86,11 +86,6 @@ def in_view(cloud: Cloud, K: np.ndarray, shape: tuple[int, int]) -> Cloud:
     return cloud.select(front & (u >= 0) & (u <= shape[1] - 1) & (v >= 0) & (v <= shape[0] - 1))
 
 
-def _masked_sum(local: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Sum over the points ``mask (F, K)`` selects of axis-major ``local (F, 3, K)``: (F, 3)."""
-    return np.einsum("fak,fk->fa", local, mask.astype(local.dtype))
-
-
 def _unit(v: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.where(n > 0, n, 1)
@@ -360,8 +355,9 @@ class Planner:
         b, flat, nb = bins
         F = len(slab)
         reach = g.max_width + g.finger_thickness
-        occ = np.bincount(np.where(slab, flat, nb * F).ravel(),
-                          minlength=nb * F + 1)[:-1].reshape(F, nb) > 0
+        occ = np.zeros(nb * F + 1, bool)
+        occ[np.where(slab, flat, nb * F).ravel()] = True
+        occ = occ[:-1].reshape(F, nb)
         gap = max(int(np.ceil(g.finger_thickness / bin_size)), 1)
         csum = np.concatenate([np.zeros((F, 1), np.int64), np.cumsum(occ, 1)], 1)
         empty = np.zeros_like(occ)
@@ -386,7 +382,7 @@ class Planner:
         L, H = g.finger_length, g.finger_height
         # only points that some depth's finger slab can hold matter: find them from their
         # approach (x) and height (z) coordinates, pack them to the front of each row, and cut
-        # the rows to the longest such list (coordinates axis by axis: (F, 3, K))
+        # the rows to the longest such list
         m = cfg.collision_margin
         local_t = to_local(R, c, target.points)                   # (F, 3, M)
         x, z = local_t[:, 0], local_t[:, 2]
@@ -394,13 +390,16 @@ class Planner:
         keep = max(int(can.sum(axis=1).max()), 1)
         order = np.argsort(~can, axis=1, kind="stable")[:, :keep]  # (F, K)
         can = np.take_along_axis(can, order, 1)
-        local_t = np.take_along_axis(local_t, order[:, None], 2)
-        # the normals of the kept points only, turned into each frame: (F, 3, K)
-        local_n = R.transpose(0, 2, 1).astype(np.float32) @ \
-            target.normals.astype(np.float32)[order].transpose(0, 2, 1)
-        x, y, z = local_t[:, 0], local_t[:, 1], local_t[:, 2]
+        # the kept points and their normals, turned into each frame: (F, 6, K), rows x y z of
+        # the points then of the normals
+        local = np.concatenate([np.take_along_axis(local_t, order[:, None], 2),
+                                R.transpose(0, 2, 1).astype(np.float32) @
+                                target.normals.astype(np.float32)[order].transpose(0, 2, 1)], 1)
+        x, y, z, ny = local[:, 0], local[:, 1], local[:, 2], local[:, 4]
         bins = self._y_bins(y)
-        local_s = None  # scene points in each frame, once some frame reaches the collision test
+        # scene points in each frame's coordinates, filled in as frames reach the collision test
+        local_s = np.empty((len(R), 3, len(scene.points)), np.float32)
+        seen = np.zeros(len(R), bool)
         best = np.full(len(R), -1.0)
         out = np.zeros((len(R), 4))                               # width, depth, ymid, score
         for depth in sorted(cfg.depths, reverse=True):
@@ -419,13 +418,13 @@ class Planner:
             # contact normals: the outermost slab points on each side
             # (of surfaces facing each finger: across a thin wall, the inner surface's points
             # lie in the band too, facing the other way)
-            left = slab & (y < y_lo[:, None] + cfg.contact_band) & (local_n[:, 1] < 0)
-            right = slab & (y > y_hi[:, None] - cfg.contact_band) & (local_n[:, 1] > 0)
-            n_left = _unit(_masked_sum(local_n, left))
-            n_right = _unit(_masked_sum(local_n, right))
+            left = slab & (y < y_lo[:, None] + cfg.contact_band) & (ny < 0)
+            right = slab & (y > y_hi[:, None] - cfg.contact_band) & (ny > 0)
+            sums = local @ np.stack([left, right], 2).astype(np.float32)  # (F, 6, 2)
+            n_left, n_right = _unit(sums[:, 3:, 0]), _unit(sums[:, 3:, 1])
             # the line between the two contact patches (their centroids)
-            c_left = _masked_sum(local_t, left) / np.maximum(left.sum(1), 1)[:, None]
-            c_right = _masked_sum(local_t, right) / np.maximum(right.sum(1), 1)[:, None]
+            c_left = sums[:, :3, 0] / np.maximum(left.sum(1), 1)[:, None]
+            c_right = sums[:, :3, 1] / np.maximum(right.sum(1), 1)[:, None]
             line = _unit(c_right - c_left)
             ang = np.maximum(np.arccos(np.clip(-np.sum(n_left * line, 1), -1, 1)),
                              np.arccos(np.clip(np.sum(n_right * line, 1), -1, 1)))
@@ -433,22 +432,26 @@ class Planner:
             ok &= mu_needed <= cfg.friction
             if not ok.any():
                 continue
-            idx = np.flatnonzero(ok)                              # collisions: survivors only
+            # the table first (cheap, and half the survivors fail it), then the scene points
+            idx = np.flatnonzero(ok)
+            centre = c[idx] + R[idx, :, 1] * ymid[idx, None]
             dd = np.full(len(idx), depth)
+            clear = g.lowest(R[idx], centre, width[idx], dd, plane) >= cfg.clearance
+            idx, centre, dd = idx[clear], centre[clear], dd[clear]
+            if len(idx) == 0:
+                continue
+            fresh = idx[~seen[idx]]          # scene points turned into each frame once
+            if len(fresh):
+                local_s[fresh] = to_local(R[fresh], c[fresh], scene.points)
+                seen[fresh] = True
             boxes = g.boxes(width[idx], dd)                       # (f, 3, 2, 3)
             boxes[..., 1] += ymid[idx, None, None]                # centred between the jaws
-            if local_s is None:
-                local_s = to_local(R, c, scene.points)
             hits = count_inside(local_s[idx], boxes, shrink=-cfg.collision_margin).max(axis=1)
-            centre = c[idx] + R[idx, :, 1] * ymid[idx, None]
-            ok[idx] = (hits < cfg.collision_points) & \
-                (g.lowest(R[idx], centre, width[idx], dd, plane) >= cfg.clearance)
-            score = np.zeros(len(R))
-            score[idx] = self.score(mu_needed[idx], width[idx], R[idx], centre, plane, top, dd,
-                                    end)
-            take = ok & (best < 0)
-            best[take] = score[take]
-            out[take] = np.stack([width, np.full(len(R), depth), ymid, score], 1)[take]
+            free = hits < cfg.collision_points
+            idx, centre, dd = idx[free], centre[free], dd[free]
+            best[idx] = self.score(mu_needed[idx], width[idx], R[idx], centre, plane, top, dd,
+                                   end)
+            out[idx] = np.stack([width[idx], dd, ymid[idx], best[idx]], 1)
         keep = best >= 0
         if not keep.any():
             return None
