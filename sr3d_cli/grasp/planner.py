@@ -123,6 +123,7 @@ EXACT_MU_CAP = 2.0  # friction coefficient counted for exact contacts needing mo
 EXACT_FIRST = 3  # best grasps per object always scored by exact contacts (Planner._rescore)
 EXACT_POOL = 3   # times top_k grasps the rescoring may reach into (Planner._object)
 THIN_PAIR = 3.0  # a pair shorter than this many pair radii spans a thin wall (Planner._frames)
+CHUNK = 96  # frames tried at once (Planner._try_frames): 48 was ~7% slower, 192 no faster
 
 
 class Planner:
@@ -182,9 +183,9 @@ class Planner:
         for _ in range(1 + cfg.redraws):
             R, c, span = self._frames(target, plane, rng)
             pairs += len(R)
-            found = [self._try_frames(k, R[s:s + 48], c[s:s + 48], span[s:s + 48], target,
-                                      scene, plane, top, end)
-                     for s in range(0, len(R), 48)]
+            found = [self._try_frames(k, R[s:s + CHUNK], c[s:s + CHUNK], span[s:s + CHUNK],
+                                      target, scene, plane, top, end)
+                     for s in range(0, len(R), CHUNK)]
             grasps = GraspSet.concat([grasps] + [f for f in found if f is not None])
             if len(grasps) == 0:
                 continue
