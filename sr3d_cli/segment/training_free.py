@@ -44,6 +44,7 @@ SPLIT_READINGS = 0.25  # share of the whole's readings on its surface a split mu
 SPLIT_PART_IOU = 0.85  # silhouette IoU both parts of a split made by the readings must reach
 HIDDEN_READINGS = 0.15  # share of its readings a part fitted with hidden pixels must explain
 OWN_READINGS = 0.5  # share of a part's own readings its fit must hold and the whole's miss
+SHAPE_GAIN = 0.1  # outline gain of the parts over a whole no solid draws
 FOOTPRINT_APART = 0.03  # metres between two groups of readings on the table (_footprint_cut)
 BORDER_REACH = 0.1  # share of the image width along its sides where holes may be the
 # camera's own (a stereo camera's invalid left band is baseline x fx / depth wide: ~100 px at
@@ -480,7 +481,12 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     :data:`SPLIT_PART_IOU` and the outline gets no worse; and when the readings refute the
     whole's fit on one part (:data:`SPLIT_READINGS` of them above its top) and neither part's,
     both parts fitting to :data:`SPLIT_PART_IOU` and holding ``DEPTH_MIN_POINTS`` readings,
-    with the outline at most ``gain`` worse. Only the readings hold a thin attachment's or a
+    with the outline at most ``gain`` worse; and where no solid draws the whole (its IoU
+    below :data:`SPLIT_PART_IOU`) but one draws each part, the outline gaining
+    :data:`SHAPE_GAIN`, with more readings on the parts by the margin above and one part's fit
+    holding :data:`SPLIT_READINGS` of its own more than the whole's (a bottle and a lying
+    beaker whose glass gives few readings; a goblet and a beaker whose foot cut the outline
+    holds). Only the readings hold a thin attachment's or a
     footprint cut (the first may be as small as a sliver, the second follows the readings, not the
     outline). A cut the readings clearly refute (fewer on the parts by that much) does not hold
     by the outline. The best cut that holds wins (readings first; among those, a footprint cut
@@ -582,11 +588,11 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         on_whole = own_share(whole, mask)
         return on_whole is not None and on_whole <= 1 - OWN_READINGS
 
-    def holds_own(found, mask: np.ndarray) -> bool:
-        """Whether the part's fit holds :data:`OWN_READINGS` of the part's own readings more
-        than the whole's fit does."""
+    def holds_own(found, mask: np.ndarray, share: float = OWN_READINGS) -> bool:
+        """Whether the part's fit holds ``share`` of the part's own readings more than the
+        whole's fit does."""
         on_whole = own_share(whole, mask)
-        return on_whole is not None and own_share(found, mask) - on_whole >= OWN_READINGS
+        return on_whole is not None and own_share(found, mask) - on_whole >= share
 
     def above(found, mask: np.ndarray) -> int:
         """How many of the region's readings in ``mask`` stand above the fit (:func:`above_top`)."""
@@ -664,6 +670,13 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             by_readings = by_readings or min(ia, ib) >= SPLIT_PART_IOU and \
                 mean >= whole.iou - gain and min(sa, sb) >= DEPTH_MIN_POINTS and \
                 max(above(fa, a), above(fb, b)) < DEPTH_MIN_POINTS and (refutes(a) or refutes(b))
+            # no one solid draws the whole, one draws each part and the outline far better,
+            # and the readings bear the parts out: more on them by the margin, and one part's
+            # fit holding SPLIT_READINGS of its own more than the whole's
+            by_readings = by_readings or whole.iou < SPLIT_PART_IOU and \
+                min(ia, ib) >= SPLIT_PART_IOU and mean >= whole.iou + SHAPE_GAIN and \
+                sa + sb >= whole_on + margin() and \
+                (holds_own(fa, a, SPLIT_READINGS) or holds_own(fb, b, SPLIT_READINGS))
             by_outline &= sa + sb > whole_on - margin()
             score = sa + sb if by_readings else mean
         if not (by_outline or by_readings):
