@@ -206,7 +206,8 @@ def test_a_small_vial_against_a_tall_bottle_is_split_by_its_own_readings(aside, 
     assert len(parts) == 2
     ious = instance_ious(np.argmax(np.stack([np.zeros_like(region)] + parts), 0), ids)
     assert min(ious.values()) > 0.95
-    monkeypatch.setattr(training_free, "OWN_READINGS", 1.01)  # no part can hold more than all
+    for rule in ("OWN_READINGS", "OUTLINE_OWN_READINGS"):  # no part can hold more than all
+        monkeypatch.setattr(training_free, rule, 1.01)
     assert len(split_touching(region, K, plane, depth=sparse)) == 1
 
 
@@ -239,14 +240,14 @@ def test_a_goblet_and_a_glass_whose_union_draws_a_lying_goblet_are_split_by_read
     assert min(ious.values()) > 0.95
 
 
-def test_a_goblet_and_a_beaker_no_one_solid_draws_are_split_where_their_readings_stand(
+def test_a_goblet_and_a_beaker_are_split_where_their_readings_stand_not_at_the_foot(
         tmp_path, monkeypatch):
     """Generated frame (seed 4500, frame 23): a 15 cm goblet and a 10 cm beaker touching, one
-    region. No solid of revolution draws it (IoU .71). Cutting the goblet's foot from the
-    rest holds by the outline (.91), but the cut between the two groups of readings on the
-    table gives parts that each fit (.98, .86), hold 148 readings against the whole's 26,
-    and each hold 30-40% of their own more than the whole's fit: it wins (before: the foot
-    cut won, IoUs .36 / .52)."""
+    region no solid draws well (IoU .71). Cutting the goblet's foot from the rest holds by the
+    outline (.91); the cut between the two groups of readings on the table gives parts that
+    fit (.98, .86) and hold 30% and 32% of their own readings more than the whole's fit: short
+    of OWN_READINGS, enough with the outline's gain, and a cut the readings hold wins (before:
+    the foot cut won, IoUs .36 / .52)."""
     from sr3d_cli.config import IOConfig, SynthConfig
     from sr3d_cli.io.formats import discover_scenes
     from sr3d_cli.render import make_renderer
@@ -266,8 +267,39 @@ def test_a_goblet_and_a_beaker_no_one_solid_draws_are_split_where_their_readings
         return found[1], found[2]
 
     assert min(ious()) > 0.9
-    monkeypatch.setattr(training_free, "SHAPE_GAIN", 1.0)  # no outline gains that much
+    monkeypatch.setattr(training_free, "OUTLINE_OWN_READINGS", training_free.OWN_READINGS)
     assert max(ious()) < 0.6
+
+
+@pytest.mark.parametrize("rule, value, worst", [(None, None, 0.8),
+                                                ("OUTLINE_OWN_READINGS", 0.5, 0.5),
+                                                ("OUTLINE_REFUTED", 1.0, 0.7)])
+def test_a_lying_glass_behind_a_standing_one_is_split_and_the_standing_one_kept_whole(
+        tmp_path, monkeypatch, rule, value, worst):
+    """Generated frame (seed 5100, frame 18): a lying glass behind a standing one, one region
+    a standing solid draws (IoU .86). Their footprint cut draws both better (.96, .90; mean
+    +.06) and the lying glass's fit holds 33% of its readings, the whole's none: short of
+    OWN_READINGS, enough with the outline's gain (else: IoUs .58 / .38). The standing glass's
+    top, where the lying one crosses, then fits better cut off, but its fit holds none of that
+    part's readings and the whole's 12%: the outline does not hold that cut (else: .66)."""
+    from sr3d_cli.config import IOConfig, SynthConfig
+    from sr3d_cli.io.formats import discover_scenes
+    from sr3d_cli.render import make_renderer
+    from sr3d_cli.segment import training_free
+    from sr3d_cli.synth.generate import write_scene
+
+    write_scene(tmp_path / "scene_0000", 18, SynthConfig(seed=5100, views=1),
+                make_renderer("numpy"))
+    source = discover_scenes(tmp_path, IOConfig(), None)[0]
+    frame = source.load_frame("000000")
+    gt = source.load_mask(source.gt_mask_path("000000"), frame.depth_m.shape)
+    if rule:
+        monkeypatch.setattr(training_free, rule, value)
+    inst = Segmenter(SegmentConfig(), PlaneConfig())("000000", frame.rgb, frame.depth_m,
+                                                     frame.camera.K)
+    found = instance_ious(inst.ids, gt)
+    glasses = found[1], found[3]  # standing, lying
+    assert (min(glasses) > worst) if rule is None else (min(glasses) < worst)
 
 
 @pytest.mark.parametrize("back", ["beaker", "flask"])

@@ -44,7 +44,8 @@ SPLIT_READINGS = 0.25  # share of the whole's readings on its surface a split mu
 SPLIT_PART_IOU = 0.85  # silhouette IoU both parts of a split made by the readings must reach
 HIDDEN_READINGS = 0.15  # share of its readings a part fitted with hidden pixels must explain
 OWN_READINGS = 0.5  # share of a part's own readings its fit must hold and the whole's miss
-SHAPE_GAIN = 0.1  # outline gain of the parts over a whole no solid draws
+OUTLINE_OWN_READINGS = 0.25  # OWN_READINGS where the outline gains too
+OUTLINE_REFUTED = 0.1  # share of a part's own readings its fit may miss that the whole's holds
 FOOTPRINT_APART = 0.03  # metres between two groups of readings on the table (_footprint_cut)
 BORDER_REACH = 0.1  # share of the image width along its sides where holes may be the
 # camera's own (a stereo camera's invalid left band is baseline x fx / depth wide: ~100 px at
@@ -476,22 +477,21 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     glass draws a fine bottle: the bottle's neck misses the vial's readings; a part without
     readings of its own is no object). A small part gets few of the region's readings: a cut
     also holds by them (ranked below the above) when one part's fit holds
-    :data:`OWN_READINGS` of that part's own readings more than the whole's fit does, the other
-    part's fit keeps all but :data:`SPLIT_READINGS` of the whole's readings on it, both fit to
-    :data:`SPLIT_PART_IOU` and the outline gets no worse; and when the readings refute the
+    :data:`OWN_READINGS` (:data:`OUTLINE_OWN_READINGS` where the outline also gains ``gain``:
+    a bottle and a lying beaker whose glass gives few readings, a goblet and a beaker) of that
+    part's own readings more than the whole's fit does, the other part's fit keeps all but
+    :data:`SPLIT_READINGS` of the whole's readings on it, both fit to :data:`SPLIT_PART_IOU`
+    and the outline gets no worse; and when the readings refute the
     whole's fit on one part (:data:`SPLIT_READINGS` of them above its top) and neither part's,
     both parts fitting to :data:`SPLIT_PART_IOU` and holding ``DEPTH_MIN_POINTS`` readings,
-    with the outline at most ``gain`` worse; and where no solid draws the whole (its IoU
-    below :data:`SPLIT_PART_IOU`) but one draws each part, the outline gaining
-    :data:`SHAPE_GAIN`, with more readings on the parts by the margin above and one part's fit
-    holding :data:`SPLIT_READINGS` of its own more than the whole's (a bottle and a lying
-    beaker whose glass gives few readings; a goblet and a beaker whose foot cut the outline
-    holds). Only the readings hold a thin attachment's or a
+    with the outline at most ``gain`` worse. Only the readings hold a thin attachment's or a
     footprint cut (the first may be as small as a sliver, the second follows the readings, not the
-    outline). A cut the readings clearly refute (fewer on the parts by that much) does not hold
-    by the outline. The best cut that holds wins (readings first; among those, a footprint cut
-    only where no other holds, its edge being only as fine as the readings) and each part is
-    split again, ``rounds`` levels deep (``whole``: the region's fit when already known).
+    outline). A cut the readings clearly refute (fewer on the parts by that much, or a part
+    whose fit holds :data:`OUTLINE_REFUTED` fewer of its own than the whole's: a glass's top
+    cut off where a lying glass behind it crosses) does not hold by the outline. The best cut
+    that holds wins (readings first; among those, a footprint cut only where no other holds,
+    its edge being only as fine as the readings) and each part is split again, ``rounds``
+    levels deep (``whole``: the region's fit when already known).
     Where one part stands in front of the other (:func:`~sr3d_cli.geometry.occlusion.in_front`),
     the part behind is fitted with the front part's pixels as hidden, so that it may reach down
     behind it (:func:`~sr3d_cli.reconstruct.revolution_fit.fit_revolution`'s ``occluders``),
@@ -661,23 +661,23 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             sa, sb = on_surface(fa, a), on_surface(fb, b)
             by_count = (min(ia, ib) >= SPLIT_PART_IOU and min(sa, sb) >= DEPTH_MIN_POINTS
                         and sa + sb >= whole_on + margin())
-            # a small part's own readings (ranked below a cut the region's count holds)
+            # a small part's own readings (ranked below a cut the region's count holds); fewer
+            # of them where the outline gains too
+            own = OWN_READINGS if mean < whole.iou + gain else OUTLINE_OWN_READINGS
             by_readings = by_count or min(ia, ib) >= SPLIT_PART_IOU and mean >= whole.iou and \
-                any(holds_own(f, part) and s_other >= (1 - SPLIT_READINGS) * on_surface(
+                any(holds_own(f, part, own) and s_other >= (1 - SPLIT_READINGS) * on_surface(
                     whole, other) for f, part, s_other, other in ((fa, a, sb, b), (fb, b, sa, a)))
             # readings above the whole's fit and above neither part's (the outline may be a
             # little worse: the whole's fit drew it with a shape the readings rule out)
             by_readings = by_readings or min(ia, ib) >= SPLIT_PART_IOU and \
                 mean >= whole.iou - gain and min(sa, sb) >= DEPTH_MIN_POINTS and \
                 max(above(fa, a), above(fb, b)) < DEPTH_MIN_POINTS and (refutes(a) or refutes(b))
-            # no one solid draws the whole, one draws each part and the outline far better,
-            # and the readings bear the parts out: more on them by the margin, and one part's
-            # fit holding SPLIT_READINGS of its own more than the whole's
-            by_readings = by_readings or whole.iou < SPLIT_PART_IOU and \
-                min(ia, ib) >= SPLIT_PART_IOU and mean >= whole.iou + SHAPE_GAIN and \
-                sa + sb >= whole_on + margin() and \
-                (holds_own(fa, a, SPLIT_READINGS) or holds_own(fb, b, SPLIT_READINGS))
-            by_outline &= sa + sb > whole_on - margin()
+            # no cut the readings refute holds by the outline: fewer on the parts by the
+            # margin, or a part whose fit holds OUTLINE_REFUTED fewer of its own than the whole's
+            by_outline &= sa + sb > whole_on - margin() and not any(
+                own_share(f, part) is not None and
+                own_share(f, part) < own_share(whole, part) - OUTLINE_REFUTED
+                for f, part in ((fa, a), (fb, b)))
             score = sa + sb if by_readings else mean
         if not (by_outline or by_readings):
             continue
