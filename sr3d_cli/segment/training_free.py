@@ -594,6 +594,19 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         on_whole = own_share(whole, mask)
         return on_whole is not None and own_share(found, mask) - on_whole >= share
 
+    def refuted(fa, a: np.ndarray, fb, b: np.ndarray, on_parts: int) -> bool:
+        """Whether the readings refute a cut into ``a`` and ``b`` (fits ``fa``, ``fb``; with
+        ``on_parts`` readings on them): fewer on the parts than on the whole by the margin, or
+        a part whose fit holds :data:`OUTLINE_REFUTED` fewer of its own readings than the
+        whole's fit does."""
+        if on_parts <= whole_on - margin():
+            return True
+        for found, part in ((fa, a), (fb, b)):
+            mine = own_share(found, part)
+            if mine is not None and mine < own_share(whole, part) - OUTLINE_REFUTED:
+                return True
+        return False
+
     def above(found, mask: np.ndarray) -> int:
         """How many of the region's readings in ``mask`` stand above the fit (:func:`above_top`)."""
         return above_top(found, heights[mask[readings[1], readings[0]]], plane, DEPTH_BAND)
@@ -672,12 +685,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             by_readings = by_readings or min(ia, ib) >= SPLIT_PART_IOU and \
                 mean >= whole.iou - gain and min(sa, sb) >= DEPTH_MIN_POINTS and \
                 max(above(fa, a), above(fb, b)) < DEPTH_MIN_POINTS and (refutes(a) or refutes(b))
-            # no cut the readings refute holds by the outline: fewer on the parts by the
-            # margin, or a part whose fit holds OUTLINE_REFUTED fewer of its own than the whole's
-            by_outline &= sa + sb > whole_on - margin() and not any(
-                own_share(f, part) is not None and
-                own_share(f, part) < own_share(whole, part) - OUTLINE_REFUTED
-                for f, part in ((fa, a), (fb, b)))
+            # no cut the readings refute holds by the outline (see :func:`refuted`)
+            by_outline = by_outline and not refuted(fa, a, fb, b, sa + sb)
             score = sa + sb if by_readings else mean
         if not (by_outline or by_readings):
             continue
