@@ -369,6 +369,7 @@ def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict
     generated_set(folder, frames, SynthConfig(seed=BREAKDOWN_SEED, views=1), renderer)
     planners, pipeline = _planners(cfg)[:BREAKDOWN_DRAWS], Pipeline(cfg)
     conditions, top1, merged = {}, {}, {}
+    rims = [rim_only(source, "000000", cfg) for source in discover_scenes(folder, IOConfig(), None)]
     for condition in CONDITIONS:
         out = work / f"study{BREAKDOWN_SEED}_{condition.replace(' ', '_')}"
         shutil.rmtree(out, ignore_errors=True)
@@ -390,7 +391,11 @@ def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict
                 merged[source.name] = _merged_objects(source, fid, depth.shape)
             print("breakdown", condition, source.name,
                   f"top1/0 {by_draw[0][-1]['top1_success']:.2f}", file=sys.stderr)
-        conditions[condition] = {"depth": mean_metrics(rows), "grasp": _over_draws(by_draw)}
+        conditions[condition] = {"depth": mean_metrics(rows), "grasp": _over_draws(by_draw),
+                                 "apart": {model: _top1_apart(
+                                     by_draw if model == "grid" else
+                                     [[f[model] for f in frames] for frames in by_draw], rims)
+                                     for model in ("grid",) + OTHER_CONTACTS}}
         top1[condition] = [[(name, f["top1"]) for name, f in zip(names, frames)]
                            for frames in by_draw]
     objects = _object_rows(folder, top1, merged)
@@ -679,6 +684,18 @@ def _breakdown_report(breakdown: dict) -> list[str]:
                   f"| the rest ({m['rest_objects']}) | " + " | ".join(
                       f"{c['merged']['rest_top1_success']:.3f}" for c in conditions.values())
                   + " |"]
+    if all("apart" in c for c in conditions.values()):
+        apart = next(iter(conditions.values()))["apart"]
+        first = apart["grid"]
+        lines += ["", "Top-1 of the objects only a pinch across the rim can hold (`rim_only`) and "
+                  "of the others, by each contact model:", "",
+                  "| objects | contacts | " + " | ".join(conditions) + " |",
+                  "|---|---|" + "---|" * len(conditions)]
+        for group in ("rim only", "others"):
+            for model in apart:
+                lines.append(f"| {group} ({first[group]['objects']}) | {model} | " + " | ".join(
+                    f"{c['apart'][model][group]['top1_success']:.3f}"
+                    for c in conditions.values()) + " |")
     return lines + [""]
 
 
