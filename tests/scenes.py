@@ -43,3 +43,17 @@ def solids_on_table(placements):
         meshes.append(RenderMesh(m.vertices @ (height * R).T + base, np.asarray(m.faces), k))
     out = make_renderer("numpy").render(meshes, Camera(K_TABLE, 640, 480))
     return out.ids, K_TABLE, plane, out.depth.astype(np.float64)
+
+
+def generated_frame(folder, seed: int, index: int, renderer: str = "numpy"):
+    """Frame ``index`` of the synthetic generator's seed ``seed``, written under ``folder``:
+    (its scene source, the loaded frame, the true instance ids)."""
+    from sr3d_cli.config import IOConfig, SynthConfig
+    from sr3d_cli.io.formats import discover_scenes
+    from sr3d_cli.synth.generate import write_scene
+
+    write_scene(folder / "scene_0000", index, SynthConfig(seed=seed, views=1),
+                make_renderer(renderer))
+    source = discover_scenes(folder, IOConfig(), None)[0]
+    frame = source.load_frame("000000")
+    return source, frame, source.load_mask(source.gt_mask_path("000000"), frame.depth_m.shape)

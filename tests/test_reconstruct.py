@@ -27,7 +27,7 @@ from sr3d_cli.reconstruct.revolution_fit import (RevolutionFit, _resting_tilt, a
                                                  carved, fit_revolution, smoothed,
                                                  straight_walls)
 from tests import onnx_builders
-from tests.scenes import GLASS, solids_on_table, table_point
+from tests.scenes import GLASS, generated_frame, solids_on_table, table_point
 
 K = np.array([[600.0, 0, 319.5], [0, 600, 239.5], [0, 0, 1]])
 
@@ -677,15 +677,10 @@ def test_an_open_beaker_looked_into_stands_by_the_readings_inside_it(tmp_path):
     which only the open standing model has: counted on the lidded one, the lying fit took 70 of
     them against 29, and the beaker was laid down (a 42 mm depth error over it). A change to
     the generator redraws the scene: find such a beaker again on the breakdown's study set."""
-    from sr3d_cli.config import PlaneConfig, SynthConfig
-    from sr3d_cli.render import make_renderer
+    from sr3d_cli.config import PlaneConfig
     from sr3d_cli.segment import support_plane
-    from sr3d_cli.synth.generate import write_scene
 
-    write_scene(tmp_path / "scene", 20, SynthConfig(seed=1500, views=1), make_renderer("auto"))
-    source = next(iter(discover_scenes(tmp_path / "scene", IOConfig(), None)))
-    frame = source.load_frame("000000")
-    ids = source.load_mask(source.gt_mask_path("000000"), frame.depth_m.shape)
+    source, frame, ids = generated_frame(tmp_path, 1500, 20, renderer="auto")
     truth = next(o for o in source.load_gt_objects("000000")["objects"] if o["id"] == 3)
     assert truth["label"] == "beaker"
     K_frame = frame.camera.K

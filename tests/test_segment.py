@@ -17,7 +17,14 @@ from sr3d_cli.io.atomic import write_png
 from sr3d_cli.io.images import read_mask
 from sr3d_cli.segment import Segmenter, import_masks, support_plane
 from tests import onnx_builders
-from tests.scenes import GLASS, solids_on_table
+from tests.scenes import GLASS, generated_frame, solids_on_table
+
+
+def _segmented_ious(frame, gt: np.ndarray) -> dict[int, float]:
+    """Each true object's best IoU against the default training-free segmenter's instances."""
+    inst = Segmenter(SegmentConfig(), PlaneConfig())("000000", frame.rgb, frame.depth_m,
+                                                     frame.camera.K)
+    return instance_ious(inst.ids, gt)
 
 
 def test_support_plane_recovers_a_tilted_table():
@@ -219,17 +226,9 @@ def test_a_goblet_and_a_glass_whose_union_draws_a_lying_goblet_are_split_by_read
     readings lie on any surface, so neither the outline nor the count of readings on the fits
     splits it (IoUs .65 / .35 before); but 30% of the goblet part's readings stand above that
     lying fit's top and none above either part's."""
-    from sr3d_cli.config import IOConfig, SynthConfig
-    from sr3d_cli.io.formats import discover_scenes
-    from sr3d_cli.render import make_renderer
     from sr3d_cli.segment.training_free import _disk, split_touching
-    from sr3d_cli.synth.generate import write_scene
 
-    write_scene(tmp_path / "scene_0000", 0, SynthConfig(seed=4700, views=1),
-                make_renderer("numpy"))
-    source = discover_scenes(tmp_path, IOConfig(), None)[0]
-    frame = source.load_frame("000000")
-    gt = source.load_mask(source.gt_mask_path("000000"), frame.depth_m.shape)
+    _, frame, gt = generated_frame(tmp_path, 4700, 0)
     pair = np.where(np.isin(gt, [1, 3]), gt, 0)  # the goblet and the glass
     region = cv2.morphologyEx((pair > 0).astype(np.uint8), cv2.MORPH_CLOSE, _disk(6)) > 0
     assert cv2.connectedComponents(region.astype(np.uint8))[0] == 2  # one region
@@ -248,22 +247,12 @@ def test_a_goblet_and_a_beaker_are_split_where_their_readings_stand_not_at_the_f
     fit (.98, .86) and hold 30% and 32% of their own readings more than the whole's fit: short
     of OWN_READINGS, enough with the outline's gain, and a cut the readings hold wins (before:
     the foot cut won, IoUs .36 / .52)."""
-    from sr3d_cli.config import IOConfig, SynthConfig
-    from sr3d_cli.io.formats import discover_scenes
-    from sr3d_cli.render import make_renderer
     from sr3d_cli.segment import training_free
-    from sr3d_cli.synth.generate import write_scene
 
-    write_scene(tmp_path / "scene_0000", 23, SynthConfig(seed=4500, views=1),
-                make_renderer("numpy"))
-    source = discover_scenes(tmp_path, IOConfig(), None)[0]
-    frame = source.load_frame("000000")
-    gt = source.load_mask(source.gt_mask_path("000000"), frame.depth_m.shape)
+    _, frame, gt = generated_frame(tmp_path, 4500, 23)
 
     def ious():  # of the goblet and the beaker
-        inst = Segmenter(SegmentConfig(), PlaneConfig())("000000", frame.rgb, frame.depth_m,
-                                                         frame.camera.K)
-        found = instance_ious(inst.ids, gt)
+        found = _segmented_ious(frame, gt)
         return found[1], found[2]
 
     assert min(ious()) > 0.9
@@ -282,22 +271,12 @@ def test_a_lying_glass_behind_a_standing_one_is_split_and_the_standing_one_kept_
     OWN_READINGS, enough with the outline's gain (else: IoUs .58 / .38). The standing glass's
     top, where the lying one crosses, then fits better cut off, but its fit holds none of that
     part's readings and the whole's 12%: the outline does not hold that cut (else: .66)."""
-    from sr3d_cli.config import IOConfig, SynthConfig
-    from sr3d_cli.io.formats import discover_scenes
-    from sr3d_cli.render import make_renderer
     from sr3d_cli.segment import training_free
-    from sr3d_cli.synth.generate import write_scene
 
-    write_scene(tmp_path / "scene_0000", 18, SynthConfig(seed=5100, views=1),
-                make_renderer("numpy"))
-    source = discover_scenes(tmp_path, IOConfig(), None)[0]
-    frame = source.load_frame("000000")
-    gt = source.load_mask(source.gt_mask_path("000000"), frame.depth_m.shape)
+    _, frame, gt = generated_frame(tmp_path, 5100, 18)
     if rule:
         monkeypatch.setattr(training_free, rule, value)
-    inst = Segmenter(SegmentConfig(), PlaneConfig())("000000", frame.rgb, frame.depth_m,
-                                                     frame.camera.K)
-    found = instance_ious(inst.ids, gt)
+    found = _segmented_ious(frame, gt)
     glasses = found[1], found[3]  # standing, lying
     assert (min(glasses) > worst) if rule is None else (min(glasses) < worst)
 
