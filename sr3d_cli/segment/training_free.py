@@ -571,16 +571,21 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     def margin() -> float:
         return max(DEPTH_MIN_POINTS, SPLIT_READINGS * whole_on)
 
+    shares: dict = {}  # own_share's answers for the cut being judged (cleared for each)
+
     def own_share(found, mask: np.ndarray) -> float | None:
         """The share of the part's own readings (up to ``DEPTH_SAMPLES`` of them: a small
         object gets few of the region's sample) on the fit's surface; None with fewer than
-        ``DEPTH_MIN_POINTS``."""
-        inside = mask[every[1], every[0]]
-        xs, ys, raw = evenly(tuple(r[inside] for r in every), DEPTH_SAMPLES)
-        if len(xs) < DEPTH_MIN_POINTS:
-            return None
-        return 0.0 if found is None else \
-            raw_support(found, xs, ys, raw, K, mask.shape, DEPTH_BAND) / len(xs)
+        ``DEPTH_MIN_POINTS``. Each is computed once per cut: the rules below ask for the same
+        fit and part several times."""
+        key = (id(found), id(mask))
+        if key not in shares:  # the fit and the mask are kept with it: their ids stay theirs
+            inside = mask[every[1], every[0]]
+            xs, ys, raw = evenly(tuple(r[inside] for r in every), DEPTH_SAMPLES)
+            share = None if len(xs) < DEPTH_MIN_POINTS else 0.0 if found is None else \
+                raw_support(found, xs, ys, raw, K, mask.shape, DEPTH_BAND) / len(xs)
+            shares[key] = (found, mask, share)
+        return shares[key][2]
 
     def misses(mask: np.ndarray) -> bool:
         """Whether a fit of the part could hold :data:`OWN_READINGS` of its own readings
@@ -654,6 +659,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
 
     best, whole_on = None, None  # best: (by readings, score), parts with their fits
     for i, (a, b) in enumerate(cuts):
+        shares.clear()
         if whole is None:  # fitted once a cut turns up (most regions have none)
             whole = fit(region)
         if whole is None:
