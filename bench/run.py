@@ -369,7 +369,8 @@ def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict
     generated_set(folder, frames, SynthConfig(seed=BREAKDOWN_SEED, views=1), renderer)
     planners, pipeline = _planners(cfg)[:BREAKDOWN_DRAWS], Pipeline(cfg)
     conditions, top1, merged = {}, {}, {}
-    rims = [rim_only(source, "000000", cfg) for source in discover_scenes(folder, IOConfig(), None)]
+    rims = {source.name: rim_only(source, "000000", cfg)
+            for source in discover_scenes(folder, IOConfig(), None)}
     for condition in CONDITIONS:
         out = work / f"study{BREAKDOWN_SEED}_{condition.replace(' ', '_')}"
         shutil.rmtree(out, ignore_errors=True)
@@ -394,7 +395,8 @@ def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict
         conditions[condition] = {"depth": mean_metrics(rows), "grasp": _over_draws(by_draw),
                                  "apart": {model: _top1_apart(
                                      by_draw if model == "grid" else
-                                     [[f[model] for f in frames] for frames in by_draw], rims)
+                                     [[f[model] for f in frames] for frames in by_draw],
+                                     [rims[name] for name in names])
                                      for model in ("grid",) + OTHER_CONTACTS}}
         top1[condition] = [[(name, f["top1"]) for name, f in zip(names, frames)]
                            for frames in by_draw]
