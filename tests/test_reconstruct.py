@@ -722,6 +722,24 @@ def test_straight_walls_sets_a_slightly_leaning_wall_upright_and_nothing_else():
         assert np.array_equal(straight_walls(other, deg).profile, other.profile)
 
 
+def test_straight_walls_keeps_the_wall_upright_up_to_the_lip():
+    """A lip spread over the top 15 mm (as the fit and the smoothing leave a beaker's): the wall
+    goes upright to the level below the top, the top keeps the lip; a top narrower than the
+    wall (a bottle's shoulder) is left as fitted."""
+    h = 0.1
+    z = np.linspace(0.005, 0.1, 39)
+    flared = 0.04 + 0.0025 * np.clip((z - 0.085) / 0.015, 0, 1)
+    narrowed = 0.04 - 0.01 * np.clip((z - 0.085) / 0.015, 0, 1)
+    for r, top_kept in ((flared, True), (narrowed, False)):
+        prof = np.vstack([[0.0, 0.0], np.column_stack([r, z]), [0.0, h]]) / h
+        fit = RevolutionFit(prof, np.zeros(3), np.array([0.0, 0.0, 1.0]), h, "standing", 1.0)
+        out = straight_walls(fit, 2.0).profile[1:-1, 0] * h
+        assert out[-1] == pytest.approx(r[-1])
+        if top_kept:
+            assert np.allclose(out[:-1], 0.04) and out[-1] - out[-2] > 0.002
+        else:
+            assert np.allclose(out[z > 0.09], r[z > 0.09])
+
 
 @pytest.mark.parametrize("behind, aside", [(0.06, 0.04), (0.08, 0.02), (0.065, 0.03),
                                            (0.09, 0.0)])
