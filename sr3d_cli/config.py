@@ -143,6 +143,7 @@ class GraspConfig:
     contact_band: float = 0.002
     collision_points: int = 3
     collision_margin: float = 0.003
+    tight_margins: float = 0.5
     mesh_points: int = 2400
     stride: int = 3
     nms_distance: float = 0.03

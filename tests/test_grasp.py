@@ -205,6 +205,25 @@ def test_object_wider_than_the_gripper_gets_no_grasp():
     assert messages and "0.080 m opening" in messages[0]
 
 
+def test_an_object_just_under_the_opening_is_held_with_tight_margins():
+    """75 mm across: with 4 mm either side the 80 mm opening is too small, with the margins
+    halved (``tight_margins``) it fits, and the true scene holds the grasp."""
+    drum = _on_table(trimesh.creation.cylinder(radius=0.0375, height=0.05, sections=96))
+    cfg = Config().grasp
+    target = mesh_cloud(drum, np.eye(4), 1.0, 1, 3000)
+    scene = Cloud.concat([_table_cloud(), target])
+    cfg.tight_margins = 0.0
+    grasps, messages = Planner(cfg).plan(scene, {1: target}, PLANE)
+    assert len(grasps) == 0 and "0.080 m opening" in messages[0]
+    cfg.tight_margins = 0.5
+    grasps, messages = Planner(cfg).plan(scene, {1: target}, PLANE)
+    assert not messages and len(grasps) >= 1
+    assert np.all(grasps.widths <= GRIPPER.max_width)
+    assert np.all(grasps.widths >= 0.075 + 2 * 0.5 * cfg.width_margin - 1e-3)
+    summary = summarise(grasps, judge(grasps, _truth([drum]), GRIPPER), [1], friction=0.5)
+    assert summary["top1"] == {"1": True}
+
+
 def _beaker(radius: float = 0.05, height: float = 0.1, wall: float = 0.002) -> trimesh.Trimesh:
     """An open thin-walled vessel standing on the table (z up in its own frame)."""
     outer = [(0, 0), (radius, 0), (radius, height)]
