@@ -14,7 +14,7 @@ import numpy as np
 import trimesh
 
 from sr3d_cli.errors import InputError
-from sr3d_cli.geometry.occlusion import occluders
+from sr3d_cli.geometry.occlusion import occluders, opaque_objects
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points
 from sr3d_cli.io.atomic import write_bytes, write_json, write_npy, write_png
@@ -100,6 +100,12 @@ def write_mesh(path, mesh: trimesh.Trimesh) -> None:
     write_bytes(path, mesh.export(file_type="ply", encoding="binary"))
 
 
+def _with_opaque(frame: Frame, ids: np.ndarray, plane) -> np.ndarray:
+    """The instances with the opaque objects the raw depth sees added (:func:`opaque_objects`):
+    what may stand in front of an instance and hide its foot."""
+    return ids if plane is None else opaque_objects(ids, frame.depth_m, frame.camera.K, plane)
+
+
 def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
                       ) -> tuple[int, list[str]]:
     """Reconstruct every instance of a frame; returns (meshes written, object messages)."""
@@ -107,11 +113,12 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
     ids, records = load_instances(source, fid, frame.depth_m.shape, which_masks)
     plane, why = frame_plane(frame, ids, plane_cfg)
     written, messages = 0, []
+    seen = _with_opaque(frame, ids, plane)
     for k, record in sorted(records.items()):
         try:
             if plane is None and reconstructor.cfg.backend != "onnx":
                 raise ValueError(why)
-            front = None if plane is None else occluders(ids, k, frame.camera.K, plane)
+            front = None if plane is None else occluders(seen, k, frame.camera.K, plane)
             result = reconstructor(frame.rgb, ids == k, frame.camera.K, plane,
                                    record.get("label", ""), frame.depth_m, front)
         except ValueError as exc:  # ObjectError, and model/fit failures of this object
@@ -162,6 +169,7 @@ def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
     ids, records = load_instances(source, fid, frame.depth_m.shape, which_masks)
     plane, why = frame_plane(frame, ids, plane_cfg)
     objects, messages = [], []
+    seen = _with_opaque(frame, ids, plane)
     for k in sorted(records):
         path = find_mesh(source, fid, k)
         try:
@@ -171,7 +179,7 @@ def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
                 raise ValueError(why)
             placement = aligner(load_mesh(path), ids == k, frame.camera.K, plane, frame.depth_m,
                                 hint=_pose_hint(path.with_suffix(".json")),
-                                occluders=occluders(ids, k, frame.camera.K, plane))
+                                occluders=occluders(seen, k, frame.camera.K, plane))
         except ValueError as exc:
             messages.append(f"object {k}: {exc}")
             continue

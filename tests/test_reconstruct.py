@@ -16,7 +16,7 @@ from sr3d_cli.config import IOConfig, ReconstructConfig
 from sr3d_cli.errors import InputError
 from sr3d_cli.evaluate import chamfer_distance
 from sr3d_cli.geometry.camera import project
-from sr3d_cli.geometry.occlusion import occluders
+from sr3d_cli.geometry.occlusion import occluders, opaque_objects
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, profile_from_mesh, revolve, silhouette
 from sr3d_cli.geometry.transforms import make_T
@@ -739,6 +739,34 @@ def test_straight_walls_keeps_the_wall_upright_up_to_the_lip():
             assert np.allclose(out[:-1], 0.04) and out[-1] - out[-2] > 0.002
         else:
             assert np.allclose(out[z > 0.09], r[z > 0.09])
+
+
+@pytest.mark.parametrize("behind, aside", [(0.06, 0.04), (0.08, 0.02)])
+def test_a_glass_whose_foot_an_opaque_solid_in_front_hides_stands_where_it_stands(behind,
+                                                                                  aside):
+    """As below, but what stands in front is opaque: no instance, only the depth camera's
+    readings on it. They make it an occluder (:func:`opaque_objects`), so the fit reaches down
+    behind it as behind a glass; readings on the table, a speck of noise and the glass's own
+    readings are no object."""
+    ids, K2, plane, depth = solids_on_table([(GLASS, 0.1, 0.0, -0.03),
+                                             (GLASS, 0.1, aside, behind - 0.03)])
+    back, true_base = ids == 2, table_point(plane, aside, behind - 0.03)
+    sparse = np.where(np.random.default_rng(0).random(depth.shape) < 0.3, depth, 0.0)
+    readings = np.where(ids == 1, depth, sparse)  # the front solid read in full
+    ys, xs = np.mgrid[:depth.shape[0], :depth.shape[1]]
+    table_depth = plane.intersect_pixels(np.column_stack([xs.ravel(), ys.ravel()]), K2)[:, 2]
+    readings = np.where(ids == 0, np.nan_to_num(table_depth.reshape(depth.shape)), readings)
+    readings[5:9, 5:9] = 0.3  # a speck of noise near the camera: 16 pixels
+    glasses = np.where(ids == 2, 2, 0)
+    solids = opaque_objects(glasses, readings, K2, plane)
+    assert set(np.unique(solids)) == {0, 2, 3}
+    assert ((solids == 3) == (ids == 1)).mean() > 0.99
+    front = occluders(solids, 2, K2, plane)
+    assert front is not None and occluders(glasses, 2, K2, plane) is None
+    fit = fit_revolution(back, K2, plane, depth=sparse, occluders=front)
+    assert fit.resting == "standing"
+    assert np.linalg.norm(fit.base - true_base) < 0.008
+    assert np.linalg.norm(fit_revolution(back, K2, plane, depth=sparse).base - true_base) > 0.01
 
 
 @pytest.mark.parametrize("behind, aside", [(0.06, 0.04), (0.08, 0.02), (0.065, 0.03),

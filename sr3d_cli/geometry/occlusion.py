@@ -38,6 +38,35 @@ def in_front(other: np.ndarray, mask: np.ndarray, down: np.ndarray) -> bool:
     return bool((near & other).any()) and _lowest(other, down) > _lowest(mask, down) + NEARER_PX
 
 
+OPAQUE_HEIGHT = 0.01  # metres above the table: readings there, off every instance, are a solid
+OPAQUE_AREA = 150  # pixels: fewer such readings together are noise, not an object
+OPAQUE_OPEN = 2  # pixels: slivers this thin (readings along a glass's outline) are dropped
+
+
+def opaque_objects(ids: np.ndarray, depth: np.ndarray, K: np.ndarray, plane: Plane,
+                   ) -> np.ndarray:
+    """``ids`` with the depth camera's solid objects added: readings (``depth`` (H, W) metres)
+    :data:`OPAQUE_HEIGHT` above the table outside every instance, in connected regions of at
+    least :data:`OPAQUE_AREA` pixels, each under a new id. An opaque cup or box in front of a
+    glass hides its foot as another glass would, but it is no instance: the depth sees it."""
+    from sr3d_cli.geometry.camera import depth_to_points
+
+    valid = np.isfinite(depth) & (depth > 0)
+    pts = depth_to_points(np.where(valid, depth, 0.0), K)
+    solid = valid & (ids == 0) & (plane.height(pts.reshape(-1, 3)).reshape(depth.shape)
+                                  > OPAQUE_HEIGHT)
+    kernel = np.ones((2 * OPAQUE_OPEN + 1,) * 2, np.uint8)
+    solid = cv2.morphologyEx(solid.astype(np.uint8), cv2.MORPH_OPEN, kernel)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(solid, connectivity=8)
+    out = ids.astype(np.int64).copy()
+    next_id = int(out.max()) + 1
+    for j in range(1, count):
+        if stats[j, cv2.CC_STAT_AREA] >= OPAQUE_AREA:
+            out[labels == j] = next_id
+            next_id += 1
+    return out
+
+
 def occluders(ids: np.ndarray, k: int, K: np.ndarray, plane: Plane) -> np.ndarray | None:
     """Pixels (H, W) bool of the instances of ``ids`` (H, W) int in front of instance ``k``
     (:func:`in_front`), near it (within :data:`REACH_SHARE` of its size); None if there are
