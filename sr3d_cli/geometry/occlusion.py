@@ -10,6 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from sr3d_cli.geometry.camera import depth_to_points
 from sr3d_cli.geometry.plane import Plane
 
 TOUCH_PX = 2  # pixels between two outlines that still touch
@@ -43,14 +44,11 @@ OPAQUE_AREA = 150  # pixels: fewer such readings together are noise, not an obje
 OPAQUE_OPEN = 2  # pixels: slivers this thin (readings along a glass's outline) are dropped
 
 
-def opaque_objects(ids: np.ndarray, depth: np.ndarray, K: np.ndarray, plane: Plane,
-                   ) -> np.ndarray:
+def opaque_objects(ids: np.ndarray, depth: np.ndarray, K: np.ndarray, plane: Plane) -> np.ndarray:
     """``ids`` with the depth camera's solid objects added: readings (``depth`` (H, W) metres)
     :data:`OPAQUE_HEIGHT` above the table outside every instance, in connected regions of at
     least :data:`OPAQUE_AREA` pixels, each under a new id. An opaque cup or box in front of a
     glass hides its foot as another glass would, but it is no instance: the depth sees it."""
-    from sr3d_cli.geometry.camera import depth_to_points
-
     valid = np.isfinite(depth) & (depth > 0)
     pts = depth_to_points(np.where(valid, depth, 0.0), K)
     solid = valid & (ids == 0) & (plane.height(pts.reshape(-1, 3)).reshape(depth.shape)

@@ -17,7 +17,9 @@ evaluator closes them on a true mesh), the worst of the grasp as planned and mov
 (with a placed mesh: whose best grasp's exact contacts do not hold) gets other seed points
 (``redraws``). An object given a fallback (a lying vessel's model opened at its wider end,
 :func:`sr3d_cli.reconstruct.unseen_mouth`) is planned on it, without the object's own depth
-(rendered from the closed model), where its own model gives no grasp.
+(rendered from the closed model), where its own model gives no grasp. One with no grasp after
+all that is planned again with its margins narrowed (``tight_margins``,
+:meth:`Planner.tightened`).
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
