@@ -718,7 +718,7 @@ def test_straight_walls_sets_a_slightly_leaning_wall_upright_and_nothing_else():
     assert np.allclose(fit.profile[[0, -1]], _wall_fit(1.0).profile[[0, -1]])
     # a real taper (4 deg), a bowed wall (4 mm), a lying fit or 0 deg: unchanged
     for other, deg in ((_wall_fit(4.0), 2.0), (_wall_fit(0.5, bulge=0.004), 2.0),
-                       (_wall_fit(1.0, "lying"), 2.0), (_wall_fit(1.0), 0.0)):
+                       (_wall_fit(4.0, "lying"), 2.0), (_wall_fit(1.0), 0.0)):
         assert np.array_equal(straight_walls(other, deg).profile, other.profile)
 
 
@@ -742,6 +742,15 @@ def test_straight_walls_keeps_the_wall_upright_up_to_the_lip():
             assert np.allclose(out[:-1], 0.04) and out[-1] - out[-2] > 0.002
         else:
             assert np.allclose(out[z > 0.09], r[z > 0.09])
+    # lying, the mouth may be either end: a lip spread at the base end is cut back too, and
+    # a shoulder narrowing at the other is kept
+    r = 0.04 + 0.005 * np.clip((0.015 - z) / 0.01, 0, 1) \
+        - 0.01 * np.clip((z - 0.085) / 0.015, 0, 1)
+    prof = np.vstack([[0.0, 0.0], np.column_stack([r, z]), [0.0, h]]) / h
+    fit = RevolutionFit(prof, np.zeros(3), np.array([1.0, 0.0, 0.0]), h, "lying", 1.0)
+    out = straight_walls(fit, 2.0).profile[1:-1, 0] * h
+    assert out[0] == pytest.approx(r[0]) and np.allclose(out[1:][z[1:] < 0.085], 0.04)
+    assert np.allclose(out[z > 0.09], r[z > 0.09])
 
 
 @pytest.mark.parametrize("behind, aside", [(0.06, 0.04), (0.08, 0.02)])
