@@ -50,19 +50,16 @@ def opaque_objects(ids: np.ndarray, depth: np.ndarray, K: np.ndarray, plane: Pla
     least :data:`OPAQUE_AREA` pixels, each under a new id. An opaque cup or box in front of a
     glass hides its foot as another glass would, but it is no instance: the depth sees it."""
     valid = np.isfinite(depth) & (depth > 0)
-    pts = depth_to_points(np.where(valid, depth, 0.0), K)
-    solid = valid & (ids == 0) & (plane.height(pts.reshape(-1, 3)).reshape(depth.shape)
-                                  > OPAQUE_HEIGHT)
+    height = plane.height(depth_to_points(np.where(valid, depth, 0.0), K))
+    solid = valid & (ids == 0) & (height > OPAQUE_HEIGHT)
     kernel = np.ones((2 * OPAQUE_OPEN + 1,) * 2, np.uint8)
     solid = cv2.morphologyEx(solid.astype(np.uint8), cv2.MORPH_OPEN, kernel)
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(solid, connectivity=8)
-    out = ids.astype(np.int64).copy()
-    next_id = int(out.max()) + 1
-    for j in range(1, count):
-        if stats[j, cv2.CC_STAT_AREA] >= OPAQUE_AREA:
-            out[labels == j] = next_id
-            next_id += 1
-    return out
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(solid, connectivity=8)
+    kept = stats[:, cv2.CC_STAT_AREA] >= OPAQUE_AREA
+    kept[0] = False  # the background
+    new_id = np.zeros(len(kept), np.int64)  # per component: its new id, 0 where dropped
+    new_id[kept] = int(ids.max()) + 1 + np.arange(kept.sum())
+    return np.where(new_id[labels] > 0, new_id[labels], ids.astype(np.int64))
 
 
 def occluders(ids: np.ndarray, k: int, K: np.ndarray, plane: Plane) -> np.ndarray | None:

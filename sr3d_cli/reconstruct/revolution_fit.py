@@ -452,7 +452,7 @@ STRAIGHT_BEND = 0.001  # metres: the most those levels may stray from one line t
 
 
 def straight_walls(fit: RevolutionFit, max_deg: float) -> RevolutionFit:
-    """A standing ``fit`` whose levels within :data:`STRAIGHT_SPAN` of its height lie on one
+    """A ``fit`` whose levels within :data:`STRAIGHT_SPAN` of its height lie on one
     line (within :data:`STRAIGHT_BEND`) leaning less than ``max_deg`` from its axis, with
     those levels set to their median radius: a wall that upright (a beaker's) is read as
     upright. The fit leans such walls outwards by half a degree or more (standing beakers of
@@ -471,8 +471,8 @@ def straight_walls(fit: RevolutionFit, max_deg: float) -> RevolutionFit:
     over the middle 15-85% of its length, and either end may be its mouth: a lying beaker's lip
     is spread the same way (seed 5700 frame 7: 48.7 -> 47.7 mm over its first 10 mm, the true
     wall 47.9 to 4 mm from the lip; fresh seeds 6100 and 6300 from the true masks, 4 draws:
-    310 -> 315 of 356 object-draws held, none fewer; with sr3d's masks 288 -> 287). ``max_deg`` 0 returns the fit
-    unchanged."""
+    310 -> 315 of 356 object-draws held, none fewer; with sr3d's masks 288 -> 287).
+    ``max_deg`` 0 returns the fit unchanged."""
     if max_deg <= 0:
         return fit
     inner = fit.profile[1:-1] * fit.height
