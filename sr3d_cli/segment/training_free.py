@@ -42,6 +42,8 @@ ON_TABLE_SHARE = 0.3  # least share of a candidate over the table's footprint
 SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (split_touching)
 SPLIT_READINGS = 0.25  # share of the whole's readings on its surface a split must add (ditto)
 SPLIT_PART_IOU = 0.85  # silhouette IoU both parts of a split made by the readings must reach
+CLEAR_GAIN = 2.0  # times the gain a cut of a whole no solid draws needs to hold by its outline
+# whatever its parts' own readings say (split_touching)
 HIDDEN_READINGS = 0.15  # share of its readings a part fitted with hidden pixels must explain
 OWN_READINGS = 0.5  # share of a part's own readings its fit must hold and the whole's miss
 OUTLINE_OWN_READINGS = 0.25  # OWN_READINGS where the outline gains too
@@ -392,28 +394,31 @@ def _nearest_seed(seeds: np.ndarray) -> np.ndarray:
 
 
 def _evidence_cuts(region: np.ndarray, glass: np.ndarray, min_area: int, close_radius: int, *,
-                   most: int = 3) -> list[tuple[np.ndarray, np.ndarray]]:
+                   most: int = 3) -> tuple[list, list]:
     """Cuts of a region along its own glass evidence. Where that evidence comes in separate
     bodies of at least ``min_area`` pixels (the ``most`` largest), each body is closed by
     ``close_radius`` and filled, as a candidate is, and takes the region's pixels nearest to it
     within that outline; each body in turn is cut from the others. Two glasses side by side a
     few pixels apart leave two bodies of evidence, but the closing that made their candidate
     bridged the gap along its whole length, so the region has no neck to cut at; the gap's
-    pixels go with neither part."""
+    pixels go with neither part. Returns those cuts, and each body's part cut from all the rest
+    of the region nearest the other bodies, gap and all (for where the others' evidence covers
+    only some of their object: a vial beside a goblet)."""
     count, labels, stats, _ = cv2.connectedComponentsWithStats(
         (glass & region).astype(np.uint8), 8)
     big = [k for k in np.argsort(-stats[:, 4]) if k > 0 and stats[k, 4] >= min_area][:most]
     if len(big) < 2:
-        return []
+        return [], []
     nearest = _nearest_seed(np.where(np.isin(labels, big), labels, 0))
     parts = []
     for k in big:
         body = cv2.morphologyEx((labels == k).astype(np.uint8), cv2.MORPH_CLOSE,
                                 _disk(close_radius))
         parts.append(region & (nearest == k) & ndimage.binary_fill_holes(body))
+    rest = [(a, region & (nearest != k)) for a, k in zip(parts, big)]
     if len(parts) == 2:
-        return [(parts[0], parts[1])]
-    return [(a, np.any([b for b in parts if b is not a], axis=0)) for a in parts]
+        return [(parts[0], parts[1])], rest
+    return [(a, np.any([b for b in parts if b is not a], axis=0)) for a in parts], rest
 
 
 def _footprint_cut(region: np.ndarray, xs: np.ndarray, ys: np.ndarray, raw: np.ndarray,
@@ -464,7 +469,10 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     edge (at most ``max_pieces``), and every grouping of them into two connected parts, each at
     least ``min_share`` of the region (a sliver of background fits anything), is a candidate; so
     is, with the ``glass`` evidence map, the cut between its separate bodies of evidence
-    (:func:`_evidence_cuts`, parts closed by ``close_radius``, held like a watershed cut); so
+    (:func:`_evidence_cuts`, parts closed by ``close_radius``, held like a watershed cut; a
+    part may be as small as ``min_area`` pixels, since a body of evidence is no sliver of
+    background, but one under ``min_share`` must fit to :data:`SPLIT_PART_IOU`; a body cut
+    from all the rest of the region ranks below a cut between bodies); so
     are every thin part hanging off the body (:func:`_attachments`, at least ``min_area``
     pixels) and, with raw ``depth``, the cut between two groups of readings that stand apart on
     the table (:func:`_footprint_cut`: one object behind another). A cut holds by the outline
@@ -475,8 +483,10 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     :data:`SPLIT_READINGS` of the whole's count and at least ``DEPTH_MIN_POINTS``, with both
     parts fitting to :data:`SPLIT_PART_IOU` and holding that many readings each (a vial behind a
     glass draws a fine bottle: the bottle's neck misses the vial's readings; a part without
-    readings of its own is no object). A small part gets few of the region's readings: a cut
-    also holds by them (ranked below the above) when one part's fit holds
+    readings of its own is no object), and, in a part of a region already cut, with the
+    outline no worse (a lying beaker or a goblet cut in two holds more readings on two fits'
+    surfaces that draw it worse). A small part gets few of the region's readings: a cut also
+    holds by them (ranked below the above) when one part's fit holds
     :data:`OWN_READINGS` (:data:`OUTLINE_OWN_READINGS` where the outline also gains ``gain``:
     a bottle and a lying beaker whose glass gives few readings, a goblet and a beaker) of that
     part's own readings more than the whole's fit does, the other part's fit keeps all but
@@ -488,7 +498,9 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     footprint cut (the first may be as small as a sliver, the second follows the readings, not the
     outline). A cut the readings clearly refute (fewer on the parts by that much, or a part
     whose fit holds :data:`OUTLINE_REFUTED` fewer of its own than the whole's: a glass's top
-    cut off where a lying glass behind it crosses) does not hold by the outline. The best cut
+    cut off where a lying glass behind it crosses) does not hold by the outline, unless no
+    solid draws the whole (IoU under :data:`SPLIT_PART_IOU`) while both parts fit to it and
+    gain :data:`CLEAR_GAIN` times ``gain``: a goblet and a lying beaker behind it. The best cut
     that holds wins (readings first; among those, a footprint cut only where no other holds,
     its edge being only as fine as the readings) and each part is split again, ``rounds``
     levels deep (``whole``: the region's fit when already known).
@@ -507,6 +519,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
 
     if rounds < 1:
         return [region]
+    is_part = whole is not None  # of a region already cut
     labels, n, length = _pieces(region, max_pieces)
     area = float(region.sum())
     cuts = []
@@ -517,9 +530,13 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             a = np.isin(labels, first)
             if min(a.sum(), area - a.sum()) >= min_share * area:
                 cuts.append((a, region & ~a))
+    rests = range(0)  # cuts of one body's evidence from all the rest: ranked below the others
     if glass is not None:
-        cuts += [(a, b) for a, b in _evidence_cuts(region, glass, min_area, close_radius)
-                 if min(a.sum(), b.sum()) >= min_share * area]
+        plain, rest = ([(a, b) for a, b in found if min(a.sum(), b.sum()) >= min_area]
+                       for found in _evidence_cuts(region, glass, min_area, close_radius))
+        cuts += plain
+        rests = range(len(cuts), len(cuts) + len(rest))
+        cuts += rest
     readings = None
     if depth is not None:
         every = off_table_readings(region, depth, K, plane, samples=int(area))
@@ -673,13 +690,16 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         if i >= grouped and (fa is None or fa.iou < SPLIT_PART_IOU):
             continue
         ia, ib = (f.iou if f is not None else -1.0 for f in (fa, fb))
+        if i < grouped and min(a.sum(), b.sum()) < min_share * area and \
+                min(ia, ib) < SPLIT_PART_IOU:
+            continue  # a small body of evidence no solid draws is a piece of an object
         mean = (ia * a.sum() + ib * b.sum()) / (a.sum() + b.sum())
         by_outline = i < grouped and min(ia, ib) > whole.iou and mean >= whole.iou + gain
         by_readings, by_count, score = False, False, mean
         if readings is not None:
             sa, sb = on_surface(fa, a), on_surface(fb, b)
             by_count = (min(ia, ib) >= SPLIT_PART_IOU and min(sa, sb) >= DEPTH_MIN_POINTS
-                        and sa + sb >= whole_on + margin())
+                        and sa + sb >= whole_on + margin() and (mean >= whole.iou or not is_part))
             # a small part's own readings (ranked below a cut the region's count holds); fewer
             # of them where the outline gains too
             own = OWN_READINGS if mean < whole.iou + gain else OUTLINE_OWN_READINGS
@@ -691,12 +711,15 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             by_readings = by_readings or min(ia, ib) >= SPLIT_PART_IOU and \
                 mean >= whole.iou - gain and min(sa, sb) >= DEPTH_MIN_POINTS and \
                 max(above(fa, a), above(fb, b)) < DEPTH_MIN_POINTS and (refutes(a) or refutes(b))
-            # no cut the readings refute holds by the outline (see :func:`refuted`)
-            by_outline = by_outline and not refuted(fa, a, fb, b, sa + sb)
+            # no cut the readings refute holds by the outline (see :func:`refuted`), unless
+            # no solid draws the whole and solids draw both parts, clearly better
+            clear = whole.iou < SPLIT_PART_IOU <= min(ia, ib) and \
+                mean >= whole.iou + CLEAR_GAIN * gain
+            by_outline = by_outline and (clear or not refuted(fa, a, fb, b, sa + sb))
             score = sa + sb if by_readings else mean
         if not (by_outline or by_readings):
             continue
-        key = (by_readings, by_count, i != footprint, score)
+        key = (by_readings, by_count, i != footprint, i not in rests, score)
         if best is None or key > best[0]:
             best = (key, ((a, fa), (b, fb)))
     if best is None:
