@@ -503,7 +503,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     gain :data:`CLEAR_GAIN` times ``gain``: a goblet and a lying beaker behind it. The best cut
     that holds wins (readings first; among those, a footprint cut only where no other holds,
     its edge being only as fine as the readings) and each part is split again, ``rounds``
-    levels deep (``whole``: the region's fit when already known).
+    levels deep (``whole``: the region's fit, given with each part of a region already cut).
     Where one part stands in front of the other (:func:`~sr3d_cli.geometry.occlusion.in_front`),
     the part behind is fitted with the front part's pixels as hidden, so that it may reach down
     behind it (:func:`~sr3d_cli.reconstruct.revolution_fit.fit_revolution`'s ``occluders``),
