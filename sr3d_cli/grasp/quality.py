@@ -218,40 +218,47 @@ def _pad_contact(R: np.ndarray, t: np.ndarray, side: int, width: float, depth: f
 
 def close_jaws(R: np.ndarray, t: np.ndarray, width: float, depth: float, ids: list[int],
                triangles: list[np.ndarray], gripper: Gripper, shifts: np.ndarray | None = None,
-               enough: float = math.inf, contacts: str = "grid"
-               ) -> tuple[str, int | None, float]:
+               enough: float = math.inf, contacts: str = "grid",
+               tilts: np.ndarray | None = None) -> tuple[str, int | None, float]:
     """Close both fingers of one grasp (rotation ``R``, centre ``t``, opening ``width``,
     ``depth``) onto the meshes (``triangles`` per object of ``ids``): (reason "ok", "no
     contact" or "two objects"; the object touched; the smallest friction coefficient giving
     force closure, inf unless "ok"). ``shifts (s, 3)``: the grasp is also closed moved by each
-    (camera frame), and the worst outcome counts (the planner's margin for a model's height
-    error); it stops at the first needing more than ``enough``. ``contacts``: the contact model
-    (:data:`CONTACTS`): rays from each pad (:func:`_contact`) or the whole flat pads
+    (camera frame), and ``tilts (r, 3, 3)``: turned by each rotation (camera frame) about its
+    centre; the worst outcome counts (the planner's margins for a model's height and slope
+    errors); it stops at the first needing more than ``enough``. ``contacts``: the contact
+    model (:data:`CONTACTS`): rays from each pad (:func:`_contact`) or the whole flat pads
     (:func:`_pad_contact`)."""
     if contacts not in CONTACTS:
         raise ValueError(f"contact model {contacts!r}: one of {', '.join(CONTACTS)}")
-    moves = np.zeros((1, 3)) if shifts is None else np.vstack([np.zeros(3), shifts])
-    local_moves = moves @ R
+    moves = [(R, t)] + [(R, t + s) for s in ([] if shifts is None else shifts)] + \
+        [(Q @ R, t) for Q in ([] if tilts is None else tilts)]
     # a finger's rays sweep only the box between the open pads: triangles outside it cannot
-    # be hit (the test is exact, only fewer triangles are cast against)
+    # be hit (the test is exact, only fewer triangles are cast against); a tilt moves a point
+    # of the box at most its distance from the centre times the angle
     eps = 1e-6
-    lo = np.array([depth - gripper.finger_length, -width / 2, -gripper.finger_height / 2]) \
-        + local_moves.min(axis=0) - eps
-    hi = np.array([depth, width / 2, gripper.finger_height / 2]) + local_moves.max(axis=0) + eps
+    lo = np.array([depth - gripper.finger_length, -width / 2, -gripper.finger_height / 2])
+    hi = np.array([depth, width / 2, gripper.finger_height / 2])
+    if tilts is not None and len(tilts):
+        turn = max(math.acos(np.clip((np.trace(Q) - 1) / 2, -1, 1)) for Q in tilts)
+        eps += turn * float(np.linalg.norm(np.maximum(np.abs(lo), np.abs(hi))))
+    local_moves = (np.array([m[1] for m in moves]) - t) @ R
+    lo = lo + local_moves.min(axis=0) - eps
+    hi = hi + local_moves.max(axis=0) + eps
     near = []
     for tri in triangles:
         local = (tri - t) @ R
         near.append(tri[np.all(local.max(axis=1) >= lo, axis=1)
                         & np.all(local.min(axis=1) <= hi, axis=1)])
     worst: tuple[str, int | None, float] = ("ok", None, -1.0)
-    for move in moves:
+    for Rm, tm in moves:
         if contacts == "pads":
-            touch = [_pad_contact(R, t + move, side, width, depth, gripper, ids, near)
+            touch = [_pad_contact(Rm, tm, side, width, depth, gripper, ids, near)
                      for side in (1, -1)]
         else:
-            touch = [_contact(origins @ R.T + t + move, direction, ids, near, width)
+            touch = [_contact(origins @ Rm.T + tm, direction, ids, near, width)
                      for origins, direction in zip(_jaw_origins(gripper, width, depth, contacts),
-                                                   (R[:, 1], -R[:, 1]))]
+                                                   (Rm[:, 1], -Rm[:, 1]))]
         if any(c is None for c in touch):
             return "no contact", None, math.inf
         if touch[0][0] != touch[1][0]:
