@@ -31,6 +31,14 @@ def rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
+def perpendiculars(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors at right angles to the unit ``axis`` and to each other, ``(e1, e2)``
+    with ``e2 = axis x e1``: a frame for rings and sections about the axis."""
+    e1 = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 = e1 / np.linalg.norm(e1)
+    return e1, np.cross(axis, e1)
+
+
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray) -> np.ndarray:
     """``T_world_cam`` of an OpenCV camera at ``eye`` looking at ``target`` (image up ~ ``up``)."""
     eye, target, up = (np.asarray(a, dtype=np.float64) for a in (eye, target, up))

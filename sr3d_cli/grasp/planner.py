@@ -36,7 +36,7 @@ import numpy as np
 
 from sr3d_cli.geometry.camera import depth_normals, depth_to_points, project
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.transforms import place_points, rotation_about
+from sr3d_cli.geometry.transforms import perpendiculars, place_points, rotation_about
 from sr3d_cli.grasp import GraspSet
 from sr3d_cli.grasp.gripper import Gripper, count_inside, to_local
 
@@ -300,9 +300,7 @@ class Planner:
         its axis than the gripper's opening less its margins at every height: only a pinch
         across one wall (a wide beaker's rim) can hold it, where a goblet's stem or a flask's
         neck can be held across."""
-        e1 = np.cross(along, [1.0, 0.0, 0.0] if abs(along[0]) < 0.9 else [0.0, 1.0, 0.0])
-        e1 /= np.linalg.norm(e1)
-        e2 = np.cross(along, e1)
+        e1, e2 = perpendiculars(along)
         h, u, v = points @ along, points @ e1, points @ e2
         cut = np.minimum(((h - h.min()) / max(float(np.ptp(h)), 1e-9) * slices).astype(int),
                          slices - 1)

@@ -27,7 +27,7 @@ from sr3d_cli.align.silhouette import project_mesh, silhouette_iou, surface_dept
 from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import hull_sides, revolve, silhouette
-from sr3d_cli.geometry.transforms import make_T, rotation_about
+from sr3d_cli.geometry.transforms import make_T, perpendiculars, rotation_about
 
 DEPTH_BAND = 0.01  # metres: a raw reading this close to a model's front surface lies on it
 DEPTH_MIN_POINTS = 30  # fewest readings on a surface that count as evidence
@@ -760,9 +760,9 @@ def nearer_factors(fit: RevolutionFit, occluders: np.ndarray, K: np.ndarray, pla
     if fit.resting != "standing" or not occluders.any():
         return np.array(factors)
     n = plane.normal
-    e1 = _unit(np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0]))
+    e1, e2 = perpendiculars(n)
     turn = np.linspace(0, 2 * np.pi, 24, endpoint=False)
-    ring = np.cos(turn)[:, None] * e1 + np.sin(turn)[:, None] * np.cross(n, e1)
+    ring = np.cos(turn)[:, None] * e1 + np.sin(turn)[:, None] * e2
     radius = float(fit.profile[1, 0] * fit.height)
     front = cv2.dilate(occluders.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
     either = front | (cv2.dilate(mask.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)
