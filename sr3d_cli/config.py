@@ -138,7 +138,7 @@ class GraspConfig:
     seed: int = 0
     redraws: int = 6
     height_tolerance: float = 0.004
-    tilt_tolerance: float = 0.0
+    tilt_tolerance: float = 4.0
     approaches: int = 7
     pair_radius: float = 0.004
     contact_band: float = 0.002

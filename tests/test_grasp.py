@@ -18,7 +18,7 @@ from sr3d_cli.geometry.raycast import first_hits
 from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.grasp import GraspSet
 from sr3d_cli.grasp.gripper import Gripper
-from sr3d_cli.grasp.planner import Cloud, Planner, in_view, mesh_cloud
+from sr3d_cli.grasp.planner import Cloud, Planner, _across_wall, in_view, mesh_cloud
 from sr3d_cli.grasp.quality import CONTACTS, TrueScene, judge, overall, summarise
 from sr3d_cli.stages import object_class
 
@@ -557,13 +557,16 @@ def test_the_best_grasps_hold_on_a_model_whose_height_is_a_few_millimetres_off()
     true beaker. Scored at the model's exact height, the best rim pinch often rests a pad on
     the lip, where the true one is not; with the contacts also found 4 mm up and down, the best
     holds. Measured over 10 seeds each: held at friction 0.5 by .3 (too tall) and .7 (too
-    short) of the best grasps without the margin, .9 and .9 with it."""
+    short) of the best grasps without the margin, .9 and .9 with it. The slope margin is off
+    here, to see this one alone: with both, .5 and .7 (the turned pinches that hold overlap
+    the wall briefly, near the rim, where the height error bites; on whole frames the slope
+    margin gains more than this loses, see the README)."""
     profile = np.asarray(open_vessel([(0, 0), (0.047, 0), (0.049, 0.003), (0.049, 0.126),
                                       (0.052, 0.129)], 0.0025, 0.0047))
     truth = _truth([_on_table(revolve(profile, 64))])
     held = {tolerance: sum((_best_held(_on_table(revolve(profile * [1.0, stretch], 64)), truth,
-                                       height_tolerance=tolerance) for stretch in (1.04, 0.96)),
-                           []) for tolerance in (0.0, 0.004)}
+                                       height_tolerance=tolerance, tilt_tolerance=0.0)
+                            for stretch in (1.04, 0.96)), []) for tolerance in (0.0, 0.004)}
     assert np.mean(held[0.004]) >= 0.85, held
     assert np.mean(held[0.004]) >= np.mean(held[0.0]) + 0.25, held
 
@@ -588,6 +591,32 @@ def test_the_best_grasps_hold_on_a_model_whose_wall_leans_a_few_degrees_off():
     assert np.mean(held[4.0]) >= np.mean(held[0.0]) + 0.3, held
 
 
+def test_only_a_pinch_across_one_wall_is_turned_against_the_walls_slope():
+    """The slope margin is for a pinch across one wall, whose jaws do not close around the
+    model's axis (one finger inside a rim). Across a body, a neck or a stem the jaws close
+    around it, and their pads, two walls apart, are checked as planned: turned 4 degrees,
+    47 mm pads move 3.3 mm at their ends, past the evaluator's 1 mm contact tie, and a grasp
+    across a bottle that holds would fail the check (the margin on every object: held-out
+    top-1 .827 -> .815)."""
+    axis, on_axis = np.array([0.0, 0.0, -1.0]), np.array([0.0, 0.0, 0.55])
+    assert _across_wall(np.array([0.049, 0.0, 0.48]), 0.013, axis, on_axis)      # a rim
+    assert not _across_wall(np.array([0.003, 0.0, 0.52]), 0.07, axis, on_axis)   # a body
+    assert not _across_wall(np.array([0.0, 0.002, 0.57]), 0.017, axis, on_axis)  # a stem
+    cylinder = _on_table(trimesh.creation.cylinder(radius=0.03, height=0.12, sections=64))
+    target = mesh_cloud(cylinder, np.eye(4), 1.0, 1, 2400)
+    scene = Cloud.concat([_table_cloud(), target])
+    best = []
+    for tilt in (0.0, 4.0):
+        cfg = Config().grasp
+        cfg.tilt_tolerance = tilt
+        grasps, _ = Planner(cfg).plan(scene, {1: target}, PLANE,
+                                      {1: np.asarray(cylinder.triangles)})
+        best.append(grasps.sorted())
+    assert len(best[0]) > 0
+    assert np.array_equal(best[0].scores, best[1].scores)
+    assert np.allclose(best[0].t, best[1].t)
+
+
 def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback():
     """A beaker 10.8 cm across lying on its side, its mouth turned away from the camera: the
     model is a closed solid (nothing seen tells an open end from a closed one), too wide for
@@ -597,7 +626,11 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
     down the table normal instead, a pinch on the side wall meets the curved wall off its
     pads' middle and every one fails the check. Measured over 10 seeds: the best grasp held
     the true (open) beaker at friction 0.5 for 10 with the margin along the axis, 4 along the
-    table normal, none without the fallback."""
+    table normal, none without the fallback. The slope margin is off here, to see these alone:
+    with it, 7 of 10 along the axis (no pinch at this mouth, whose lip flares, holds turned 4
+    degrees, and the pick among those that fail is arbitrary; scoring a pinch that fails only
+    turned as one at the friction limit gave 9 here, but lost 5 object-draws over six study
+    seeds: see the README)."""
     r, h = 0.052, 0.09
     outer = [(0, 0), (r, 0), (r, h - 0.003), (1.04 * r, h)]
     axis = np.array([1.0, 0, 0])
@@ -620,6 +653,7 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
     for seed in range(10):
         cfg = Config().grasp
         cfg.seed = seed
+        cfg.tilt_tolerance = 0.0
         planner = Planner(cfg)
         if seed < 3:
             alone, messages = planner.plan(scene, {1: target}, PLANE, surfaces)

@@ -13,8 +13,8 @@ the object's top end. Non-maximum suppression, then the
 best K per object; where the object has a placed mesh, the best of the first 3K are scored again
 with the friction their exact contacts on it need (the jaws closed onto its triangles, as the
 evaluator closes them on a true mesh), the worst of the grasp as planned and moved
-``height_tolerance`` either way along the mesh's height axis (and, where only a pinch across one
-wall holds the object, turned ``tilt_tolerance`` degrees against the wall's slope). An object
+``height_tolerance`` either way along the mesh's height axis (and, for a pinch across one
+wall, turned ``tilt_tolerance`` degrees against the wall's slope). An object
 where nothing holds
 (with a placed mesh: whose best grasp's exact contacts do not hold) gets other seed points
 (``redraws``). An object given a fallback (a lying vessel's model opened at its wider end,
@@ -36,7 +36,7 @@ import numpy as np
 
 from sr3d_cli.geometry.camera import depth_normals, depth_to_points, project
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.transforms import perpendiculars, place_points, rotation_about
+from sr3d_cli.geometry.transforms import place_points, rotation_about
 from sr3d_cli.grasp import GraspSet
 from sr3d_cli.grasp.gripper import Gripper, count_inside, to_local
 
@@ -130,6 +130,15 @@ THIN_PAIR = 3.0  # a pair shorter than this many pair radii spans a thin wall (P
 CHUNK = 96  # frames tried at once (Planner._try_frames): 48 was ~7% slower, 192 no faster
 
 
+def _across_wall(t: np.ndarray, width: float, along: np.ndarray, on_axis: np.ndarray) -> bool:
+    """Whether a grasp (centre ``t``, opening ``width``) pinches one wall of a solid of
+    revolution (axis ``along`` through ``on_axis``): its centre lies farther from the axis
+    than half the opening, so the jaws do not close around the axis (a rim pinch, one finger
+    inside the vessel) as they do across a body, a neck or a stem."""
+    off = t - on_axis
+    return float(np.linalg.norm(off - (off @ along) * along)) > width / 2
+
+
 class Planner:
     def __init__(self, cfg):
         self.cfg = cfg
@@ -200,7 +209,7 @@ class Planner:
         rng = np.random.default_rng([cfg.seed, k])
         along = plane.normal if axis is None else axis
         end = (along, float((target.points @ along).max()))  # the top end: rim, neck
-        walls = cfg.tilt_tolerance > 0 and self._held_by_walls(target.points, along)
+        on_axis = target.points.mean(axis=0)  # a solid of revolution's samples: on its axis
         grasps, pairs = GraspSet.empty(), 0
         for _ in range(1 + cfg.redraws):
             R, c, span = self._frames(target, plane, rng)
@@ -216,7 +225,7 @@ class Planner:
                 break
             # from a deeper pool: where the exact contacts fail the first ten, the next may hold
             grasps, mu = self._rescore(grasps.take(slice(0, EXACT_POOL * cfg.top_k)), k,
-                                       surface, plane, top, end, walls)
+                                       surface, plane, top, end, on_axis)
             if mu <= cfg.friction:
                 break
         if pairs == 0:
@@ -253,7 +262,7 @@ class Planner:
                 - cfg.end_weight * at_end)
 
     def _rescore(self, grasps: GraspSet, k: int, surface: np.ndarray, plane: Plane,
-                 top: float, end: tuple[np.ndarray, float], walls: bool = False
+                 top: float, end: tuple[np.ndarray, float], on_axis: np.ndarray | None = None
                  ) -> tuple[GraspSet, float]:
         """Score again with the friction the contacts need where the jaws, closed along the
         closing direction, first touch the placed mesh (``surface`` triangles), as the grasp
@@ -265,11 +274,11 @@ class Planner:
         a fitted model's height is off by a few millimetres, and a grasp that holds only at its
         exact height (fingertips on a flask's shoulder, a pad on a beaker's lip) fails on the
         true object (study seed 1500, sr3d's fits from the true masks, 4 draws: top-1 .782 ->
-        .824). Of an object only a pinch across one wall holds (:meth:`_held_by_walls`), the
-        contacts are also found with the grasp turned ``tilt_tolerance`` degrees either way
-        (:meth:`_tilts`; 0, off, by default: see the config). Best first, until the best is
-        one scored so (each costs up to three ray casts, five with the turns; most objects
-        need one to three). A
+        .824). Of a pinch across one wall (jaws that do not close around the model's axis,
+        through ``on_axis``: :func:`_across_wall`), the contacts are also found with the grasp
+        turned ``tilt_tolerance`` degrees either way (:meth:`_tilts`). Best first, until the
+        best is one scored so (each costs up to three ray casts, five with the turns; most
+        objects need one to three). A
         contact needing more than :data:`EXACT_MU_CAP` (or none) counts as that. Returns the
         grasps, sorted, and the friction the best one's exact contacts need."""
         from sr3d_cli.grasp.quality import close_jaws
@@ -285,31 +294,16 @@ class Planner:
             if checked[i]:
                 break
             R, t, w = grasps.R[i], grasps.t[i], float(grasps.widths[i])
+            wall = on_axis is not None and _across_wall(t, w, along, on_axis)
             mu[i] = close_jaws(R, t, w, float(grasps.depths[i]), [k], [surface], self.gripper,
                                shifts, enough=EXACT_MU_CAP,
-                               tilts=self._tilts(R, along) if walls else None)[2]
+                               tilts=self._tilts(R, along) if wall else None)[2]
             scores[i] = self.score(np.array([min(mu[i], EXACT_MU_CAP)]), grasps.widths[i:i + 1],
                                    grasps.R[i:i + 1], grasps.t[i:i + 1], plane, top,
                                    grasps.depths[i:i + 1], end)[0]
             checked[i] = True
         best = int(np.argmax(scores)) if len(grasps) else 0
         return replace(grasps, scores=scores).sorted(), float(mu[best]) if len(grasps) else np.inf
-
-    def _held_by_walls(self, points: np.ndarray, along: np.ndarray, slices: int = 12) -> bool:
-        """Whether an object (its surface ``points``, height axis ``along``) is wider across
-        its axis than the gripper's opening less its margins at every height: only a pinch
-        across one wall (a wide beaker's rim) can hold it, where a goblet's stem or a flask's
-        neck can be held across."""
-        e1, e2 = perpendiculars(along)
-        h, u, v = points @ along, points @ e1, points @ e2
-        cut = np.minimum(((h - h.min()) / max(float(np.ptp(h)), 1e-9) * slices).astype(int),
-                         slices - 1)
-        opening = self.gripper.max_width - 2 * self.cfg.width_margin
-        for b in range(slices):
-            inside = cut == b
-            if inside.sum() >= 10 and min(np.ptp(u[inside]), np.ptp(v[inside])) <= opening:
-                return False
-        return True
 
     def _tilts(self, R: np.ndarray, along: np.ndarray) -> np.ndarray | None:
         """The turns of one grasp (rotation ``R``) that :meth:`_rescore` also closes: by
