@@ -262,7 +262,7 @@ class Planner:
                 - cfg.end_weight * at_end)
 
     def _rescore(self, grasps: GraspSet, k: int, surface: np.ndarray, plane: Plane,
-                 top: float, end: tuple[np.ndarray, float], on_axis: np.ndarray | None = None
+                 top: float, end: tuple[np.ndarray, float], on_axis: np.ndarray
                  ) -> tuple[GraspSet, float]:
         """Score again with the friction the contacts need where the jaws, closed along the
         closing direction, first touch the placed mesh (``surface`` triangles), as the grasp
@@ -294,7 +294,7 @@ class Planner:
             if checked[i]:
                 break
             R, t, w = grasps.R[i], grasps.t[i], float(grasps.widths[i])
-            wall = on_axis is not None and _across_wall(t, w, along, on_axis)
+            wall = _across_wall(t, w, along, on_axis)
             mu[i] = close_jaws(R, t, w, float(grasps.depths[i]), [k], [surface], self.gripper,
                                shifts, enough=EXACT_MU_CAP,
                                tilts=self._tilts(R, along) if wall else None)[2]
