@@ -154,6 +154,7 @@ class GraspConfig:
     width_weight: float = 0.16
     approach_weight: float = 0.16
     centre_weight: float = 0.2
+    run_scale: float = 0.02
     end_weight: float = 0.2
     end_band: float = 0.005
 
