@@ -636,8 +636,8 @@ def _on_axis(heights) -> np.ndarray:
 
 
 def test_sections_measure_how_far_pads_stay_from_a_change_of_section():
-    """How far pads 10 mm above and below a grasp centre stay inside the run of near-constant
-    section around it: on a goblet's stem (10 to 60 mm up), most at its middle and none at
+    """How far pads 10 mm above and below a grasp centre stay inside the straight run of the
+    section around it (a cylinder or a cone, up to a kink): on a goblet's stem (10 to 60 mm up), most at its middle and none at
     the foot or the bowl; on a cylinder the base is no edge (the table keeps the fingers off
     it) and the top is one (a rim's lip, a neck's flare)."""
     down = np.array([0.0, 0.0, -1.0])  # the objects' height axis in the camera frame
@@ -659,8 +659,8 @@ def test_sections_measure_how_far_pads_stay_from_a_change_of_section():
 
 
 def test_on_a_placed_model_the_centre_term_favours_the_middle_of_a_stem():
-    """With a placed model, the centre term counts how far the pads stay inside their run
-    (``run_scale``), not how near the centre is to half the object's height: on a goblet that
+    """With a placed model, the centre term counts how far the pads stay inside their straight
+    run (``run_scale``), not how near the centre is to half the object's height: on a goblet that
     height lies in the bowl, and the stem grasp nearest it sits right under the junction,
     where a carved model's junction is often 10-55 mm off (the grasp then touches the true
     flare or hits the bowl). A stem grasp at the stem's middle now outscores one under the
