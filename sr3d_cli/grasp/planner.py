@@ -282,7 +282,6 @@ class Planner:
         rng = np.random.default_rng([cfg.seed, k])
         along = plane.normal if axis is None else axis
         end = (along, float((target.points @ along).max()))  # the top end: rim, neck
-        on_axis = target.points.mean(axis=0)  # a solid of revolution's samples: on its axis
         sections = None if surface is None else Sections.of(surface, along)
         grasps, pairs = GraspSet.empty(), 0
         for _ in range(1 + cfg.redraws):
@@ -299,7 +298,7 @@ class Planner:
                 break
             # from a deeper pool: where the exact contacts fail the first ten, the next may hold
             grasps, mu = self._rescore(grasps.take(slice(0, EXACT_POOL * cfg.top_k)), k,
-                                       surface, plane, top, end, on_axis, sections)
+                                       surface, plane, top, end, sections)
             if mu <= cfg.friction:
                 break
         if pairs == 0:
@@ -352,8 +351,8 @@ class Planner:
                 - cfg.end_weight * at_end)
 
     def _rescore(self, grasps: GraspSet, k: int, surface: np.ndarray, plane: Plane,
-                 top: float, end: tuple[np.ndarray, float], on_axis: np.ndarray,
-                 sections: Sections | None = None) -> tuple[GraspSet, float]:
+                 top: float, end: tuple[np.ndarray, float], sections: Sections
+                 ) -> tuple[GraspSet, float]:
         """Score again with the friction the contacts need where the jaws, closed along the
         closing direction, first touch the placed mesh (``surface`` triangles), as the grasp
         evaluator closes them on a true mesh: the patch normals of :meth:`_try_frames` average
@@ -365,11 +364,10 @@ class Planner:
         exact height (fingertips on a flask's shoulder, a pad on a beaker's lip) fails on the
         true object (study seed 1500, sr3d's fits from the true masks, 4 draws: top-1 .782 ->
         .824). Of a pinch across one wall (jaws that do not close around the model's axis,
-        through ``on_axis``: :func:`_across_wall`), the contacts are also found with the grasp
-        turned ``tilt_tolerance`` degrees either way (:meth:`_tilts`). Best first, until the
-        best is one scored so (each costs up to three ray casts, five with the turns; most
-        objects need one to three). A
-        contact needing more than :data:`EXACT_MU_CAP` (or none) counts as that. Returns the
+        through ``sections.origin``: :func:`_across_wall`), the contacts are also found with
+        the grasp turned ``tilt_tolerance`` degrees either way (:meth:`_tilts`). Best first,
+        until the best is one scored so (each costs up to three ray casts, five with the
+        turns; most objects need one to three). A contact needing more than :data:`EXACT_MU_CAP` (or none) counts as that. Returns the
         grasps, sorted, and the friction the best one's exact contacts need."""
         from sr3d_cli.grasp.quality import close_jaws
 
@@ -384,7 +382,7 @@ class Planner:
             if checked[i]:
                 break
             R, t, w = grasps.R[i], grasps.t[i], float(grasps.widths[i])
-            wall = bool(_across_wall(t, w, along, on_axis))
+            wall = bool(_across_wall(t, w, along, sections.origin))
             mu[i] = close_jaws(R, t, w, float(grasps.depths[i]), [k], [surface], self.gripper,
                                shifts, enough=EXACT_MU_CAP,
                                tilts=self._tilts(R, along) if wall else None)[2]
