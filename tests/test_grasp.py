@@ -637,9 +637,10 @@ def _on_axis(heights) -> np.ndarray:
 
 def test_sections_measure_how_far_pads_stay_from_a_change_of_section():
     """How far pads 10 mm above and below a grasp centre stay inside the straight run of the
-    section around it (a cylinder or a cone, up to a kink): on a goblet's stem (10 to 60 mm up), most at its middle and none at
-    the foot or the bowl; on a cylinder the base is no edge (the table keeps the fingers off
-    it) and the top is one (a rim's lip, a neck's flare)."""
+    section around it (a cylinder or a cone, up to a kink): on a goblet's stem (10 to 60 mm
+    up), most at its middle and none at the foot or the bowl; on a cylinder the base is no
+    edge (the table keeps the fingers off it) and the top is one (a rim's lip, a neck's
+    flare)."""
     down = np.array([0.0, 0.0, -1.0])  # the objects' height axis in the camera frame
     stem = Sections.of(np.asarray(_goblet().triangles), down)
     heights = np.array([0.014, 0.025, 0.035, 0.045, 0.058])

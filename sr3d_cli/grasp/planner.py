@@ -367,8 +367,9 @@ class Planner:
         through ``sections.origin``: :func:`_across_wall`), the contacts are also found with
         the grasp turned ``tilt_tolerance`` degrees either way (:meth:`_tilts`). Best first,
         until the best is one scored so (each costs up to three ray casts, five with the
-        turns; most objects need one to three). A contact needing more than :data:`EXACT_MU_CAP` (or none) counts as that. Returns the
-        grasps, sorted, and the friction the best one's exact contacts need."""
+        turns; most objects need one to three). A contact needing more than
+        :data:`EXACT_MU_CAP` (or none) counts as that. Returns the grasps, sorted, and the
+        friction the best one's exact contacts need."""
         from sr3d_cli.grasp.quality import close_jaws
 
         tol = self.cfg.height_tolerance
