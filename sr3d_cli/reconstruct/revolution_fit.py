@@ -578,9 +578,7 @@ def carved(fit: RevolutionFit, mask: np.ndarray, depth: np.ndarray, K: np.ndarra
             inside[a:b] = True
     if not inside.any():
         return fit
-    # the readings find the bowl only where its underside turns towards the camera, which may
-    # be well above the stem's top: below the lowest level where they find it, the bowl
-    # narrows into the stem at 45 degrees from the radius they give there
+    # below the lowest level whose readings find the bowl, a 45-degree cone (see above)
     thin = np.minimum(radii, stem)
     for b in np.flatnonzero(np.diff(inside.astype(np.int8)) < 0) + 1:  # first level above a run
         found = np.flatnonzero(each[b:] >= BOWL_READINGS)
