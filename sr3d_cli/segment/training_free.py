@@ -499,8 +499,10 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     outline). A cut the readings clearly refute (fewer on the parts by that much, or a part
     whose fit holds :data:`OUTLINE_REFUTED` fewer of its own than the whole's: a glass's top
     cut off where a lying glass behind it crosses) does not hold by the outline, unless no
-    solid draws the whole (IoU under :data:`SPLIT_PART_IOU`) while both parts fit to it and
-    gain :data:`CLEAR_GAIN` times ``gain``: a goblet and a lying beaker behind it. The best cut
+    solid draws the whole (IoU under :data:`SPLIT_PART_IOU`) and the parts gain
+    :data:`CLEAR_GAIN` times ``gain`` on it: a goblet and a lying beaker behind it; a standing
+    bottle a lying one leans on, whose glass reads so noisily that a fit of the whole, a lying
+    bottle too long to be one, holds as many of its readings as its own fit. The best cut
     that holds wins (readings first; among those, a footprint cut only where no other holds,
     its edge being only as fine as the readings) and each part is split again, ``rounds``
     levels deep (``whole``: the region's fit, given with each part of a region already cut).
@@ -712,9 +714,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
                 mean >= whole.iou - gain and min(sa, sb) >= DEPTH_MIN_POINTS and \
                 max(above(fa, a), above(fb, b)) < DEPTH_MIN_POINTS and (refutes(a) or refutes(b))
             # no cut the readings refute holds by the outline (see :func:`refuted`), unless
-            # no solid draws the whole and solids draw both parts, clearly better
-            clear = whole.iou < SPLIT_PART_IOU <= min(ia, ib) and \
-                mean >= whole.iou + CLEAR_GAIN * gain
+            # no solid draws the whole and the parts are drawn clearly better
+            clear = whole.iou < SPLIT_PART_IOU and mean >= whole.iou + CLEAR_GAIN * gain
             by_outline = by_outline and (clear or not refuted(fa, a, fb, b, sa + sb))
             score = sa + sb if by_readings else mean
         if not (by_outline or by_readings):
