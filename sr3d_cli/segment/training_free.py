@@ -502,7 +502,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     solid draws the whole (IoU under :data:`SPLIT_PART_IOU`) and the parts gain
     :data:`CLEAR_GAIN` times ``gain`` on it: a goblet and a lying beaker behind it; a standing
     bottle a lying one leans on, whose glass reads so noisily that a fit of the whole, a lying
-    bottle too long to be one, holds as many of its readings as its own fit. The best cut
+    bottle too long to be one, holds more of its readings than its own fit. The best cut
     that holds wins (readings first; among those, a footprint cut only where no other holds,
     its edge being only as fine as the readings) and each part is split again, ``rounds``
     levels deep (``whole``: the region's fit, given with each part of a region already cut).
