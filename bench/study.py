@@ -19,7 +19,6 @@ used 10100-10700), and read the held-out set only as totals.
 from __future__ import annotations
 
 import argparse
-import copy
 import json
 import shutil
 import sys
@@ -57,8 +56,8 @@ def run(seed: int, tag: str, frames: int, draws: int, grasp_only: str | None,
     folder = WORK / f"set{seed}"
     generated_set(folder, frames, SynthConfig(seed=seed, views=1), make_renderer("auto"))
     out = WORK / f"out{seed}_{tag}"
+    shutil.rmtree(out, ignore_errors=True)  # a rerun of a tag starts afresh: no stale stages
     if grasp_only:
-        shutil.rmtree(out, ignore_errors=True)
         shutil.copytree(WORK / f"out{seed}_{grasp_only}", out)
     pipeline = Pipeline(cfg)
     planners = _planners(cfg)[:draws]
@@ -141,8 +140,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.command == "run":
         cfg = _configured(args.set)
         for seed in args.seeds:
-            held, judged = run(seed, args.tag, args.frames, args.draws, args.grasp_only,
-                               copy.deepcopy(cfg))
+            held, judged = run(seed, args.tag, args.frames, args.draws, args.grasp_only, cfg)
             print(f"seed {seed} {args.tag}: {held} of {judged} object-draws held")
     else:
         print("\n".join(compare(args.tags, args.seeds)))
