@@ -27,26 +27,13 @@ from collections import defaultdict
 from run import GRASP_DRAWS, ROOT, _planners, _repair, generated_set
 
 from sr3d_cli import stages
-from sr3d_cli.config import Config, IOConfig, SynthConfig
+from sr3d_cli.config import Config, IOConfig, SynthConfig, build_config
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.pipeline import Pipeline
 from sr3d_cli.render import make_renderer
 
 WORK = ROOT / "work" / "study"
 FID = "000000"
-
-
-def _configured(settings: list[str]) -> Config:
-    """The default config with ``section.key=value`` settings (a value read as its default's
-    type; lists as JSON)."""
-    cfg = Config()
-    for setting in settings:
-        key, _, value = setting.partition("=")
-        section, _, name = key.partition(".")
-        part = getattr(cfg, section)
-        old = getattr(part, name)
-        setattr(part, name, json.loads(value) if isinstance(old, list) else type(old)(value))
-    return cfg
 
 
 def run(seed: int, tag: str, frames: int, draws: int, grasp_only: str | None,
@@ -138,7 +125,7 @@ def main(argv: list[str] | None = None) -> None:
     p_cmp.add_argument("--seeds", type=int, nargs="+", required=True)
     args = parser.parse_args(argv)
     if args.command == "run":
-        cfg = _configured(args.set)
+        cfg = build_config(sets=args.set)
         for seed in args.seeds:
             held, judged = run(seed, args.tag, args.frames, args.draws, args.grasp_only, cfg)
             print(f"seed {seed} {args.tag}: {held} of {judged} object-draws held")
