@@ -145,6 +145,7 @@ class GraspConfig:
     collision_points: int = 3
     collision_margin: float = 0.003
     tight_margins: float = 0.5
+    fallback_friction: float = 2.0
     mesh_points: int = 2400
     stride: int = 3
     nms_distance: float = 0.03

@@ -225,6 +225,29 @@ def test_an_object_just_under_the_opening_is_held_with_tight_margins():
     assert summary["top1"] == {"1": True}
 
 
+def test_an_object_nothing_holds_on_at_the_friction_gets_its_best_grasp_flagged():
+    """A cone cut 30 degrees from its axis, 7 cm across its foot: no two points of it face
+    each other well enough to hold at friction 0.5. With ``fallback_friction`` off it gets no
+    grasp; with it on it gets its best grasps, a message says what they need, and the true
+    cone holds the best one at a friction between the two, as planned."""
+    slope = np.radians(30)
+    cone = _on_table(revolve([(0, 0), (0.035, 0), (0.035 - 0.04 * np.tan(slope), 0.04),
+                              (0, 0.04)], 96))
+    cfg = Config().grasp
+    target = mesh_cloud(cone, np.eye(4), 1.0, 1, 3000)
+    scene = Cloud.concat([_table_cloud(), target])
+    cfg.fallback_friction = 0.0
+    grasps, messages = Planner(cfg).plan(scene, {1: target}, PLANE)
+    assert len(grasps) == 0 and "no grasp" in messages[0]
+    cfg.fallback_friction = 2.0
+    grasps, messages = Planner(cfg).plan(scene, {1: target}, PLANE)
+    assert len(grasps) >= 1
+    assert messages == ["object 1: nothing holds at friction 0.5 on the model; grasps need up "
+                        "to 2.0"]
+    best = judge(grasps.sorted().take(slice(0, 1)), _truth([cone]), GRIPPER)[0]
+    assert best["reason"] == "ok" and 0.5 < best["mu"] <= 2.0
+
+
 def _beaker(radius: float = 0.05, height: float = 0.1, wall: float = 0.002) -> trimesh.Trimesh:
     """An open thin-walled vessel standing on the table (z up in its own frame)."""
     outer = [(0, 0), (radius, 0), (radius, height)]
@@ -277,6 +300,7 @@ def test_an_object_with_nothing_held_draws_other_seed_points():
         for seed in range(10):
             cfg = Config().grasp
             cfg.seeds, cfg.seed, cfg.redraws = 4, seed, redraws
+            cfg.fallback_friction = 0.0  # the redraws alone
             grasps, messages = Planner(cfg).plan(scene, {1: target}, PLANE)
             if len(grasps):
                 held[redraws].add(seed)
@@ -691,8 +715,8 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
     down the table normal instead, a pinch on the side wall meets the curved wall off its
     pads' middle and every one fails the check. Measured over 10 seeds: the best grasp held
     the true (open) beaker at friction 0.5 for 10 with the margin along the axis, 4 along the
-    table normal, none without the fallback. The slope margin is off here, to see these alone:
-    with it, 7 of 10 along the axis (no pinch at this mouth, whose lip flares, holds turned 4
+    table normal, none without the fallback. The slope margin and ``fallback_friction`` are
+    off here, to see these alone: with the slope margin, 7 of 10 along the axis (no pinch at this mouth, whose lip flares, holds turned 4
     degrees, and the pick among those that fail is arbitrary; scoring a pinch that fails only
     turned as one at the friction limit gave 9 here, but lost 5 object-draws over six study
     seeds: see the README)."""
@@ -719,6 +743,7 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
         cfg = Config().grasp
         cfg.seed = seed
         cfg.tilt_tolerance = 0.0
+        cfg.fallback_friction = 0.0  # the closed model's rim gives grasps above 0.5
         planner = Planner(cfg)
         if seed < 3:
             alone, messages = planner.plan(scene, {1: target}, PLANE, surfaces)
