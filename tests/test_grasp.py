@@ -242,8 +242,8 @@ def test_an_object_nothing_holds_on_at_the_friction_gets_its_best_grasp_flagged(
     cfg.fallback_friction = 2.0
     grasps, messages = Planner(cfg).plan(scene, {1: target}, PLANE)
     assert len(grasps) >= 1
-    assert messages == ["object 1: nothing holds at friction 0.5 on the model; grasps need up "
-                        "to 2.0"]
+    assert messages == ["object 1: nothing holds at friction 0.5 on the model; the best grasp "
+                        "needs up to 2.00"]
     best = judge(grasps.sorted().take(slice(0, 1)), _truth([cone]), GRIPPER)[0]
     assert best["reason"] == "ok" and 0.5 < best["mu"] <= 2.0
 
@@ -715,8 +715,8 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
     down the table normal instead, a pinch on the side wall meets the curved wall off its
     pads' middle and every one fails the check. Measured over 10 seeds: the best grasp held
     the true (open) beaker at friction 0.5 for 10 with the margin along the axis, 4 along the
-    table normal, none without the fallback. The slope margin and ``fallback_friction`` are
-    off here, to see these alone: with the slope margin, 7 of 10 along the axis (no pinch at this mouth, whose lip flares, holds turned 4
+    table normal, none without the fallback. The slope margin, ``tight_margins`` and
+    ``fallback_friction`` are off here, to see these alone: with the slope margin, 7 of 10 along the axis (no pinch at this mouth, whose lip flares, holds turned 4
     degrees, and the pick among those that fail is arbitrary; scoring a pinch that fails only
     turned as one at the friction limit gave 9 here, but lost 5 object-draws over six study
     seeds: see the README)."""
@@ -744,13 +744,14 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
         cfg.seed = seed
         cfg.tilt_tolerance = 0.0
         cfg.fallback_friction = 0.0  # the closed model's rim gives grasps above 0.5
+        cfg.tight_margins = 0.0  # tight margins hold 9 of 10 along the table normal too
         planner = Planner(cfg)
         if seed < 3:
             alone, messages = planner.plan(scene, {1: target}, PLANE, surfaces)
             assert len(alone) == 0 and "0.080 m opening" in messages[0]
         for along, axes in (("axis", {1: axis}), ("table normal", None)):
             grasps, messages = planner.plan(scene, {1: target}, PLANE, surfaces, fallback, axes)
-            assert len(grasps) and not messages
+            assert len(grasps) and all("nothing holds" in m for m in messages)
             assert np.all(grasps.widths < 0.02)  # across the wall
             record = judge(grasps.sorted().take(slice(0, 1)), truth, GRIPPER)[0]
             held[along].append(record["reason"] == "ok" and record["mu"] <= 0.5)

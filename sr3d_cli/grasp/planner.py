@@ -18,11 +18,13 @@ evaluator closes them on a true mesh), the worst of the grasp as planned and mov
 wall, turned ``tilt_tolerance`` degrees against the wall's slope). An object
 where nothing holds
 (with a placed mesh: whose best grasp's exact contacts do not hold) gets other seed points
-(``redraws``). An object given a fallback (a lying vessel's model opened at its wider end,
+(``redraws``). Where still nothing holds, the object goes down a ladder until something does:
+an object given a fallback (a lying vessel's model opened at its wider end,
 :func:`sr3d_cli.reconstruct.unseen_mouth`) is planned on it, without the object's own depth
-(rendered from the closed model), where its own model gives no grasp. One with no grasp after
-all that is planned again with its margins narrowed (``tight_margins``,
-:meth:`Planner.tightened`).
+(rendered from the closed model); then both with the margins narrowed (``tight_margins``,
+:meth:`Planner.tightened`); then both accepting contacts up to ``fallback_friction``
+(:meth:`Planner.relaxed`). It keeps the grasps whose best needs the least friction on the
+model, and a message says when even those need more than ``friction``.
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
@@ -225,8 +227,8 @@ class Planner:
         (every point that can collide, targets included). ``surfaces``: the placed mesh's
         triangles (m, 3, 3) of objects that have one; their best grasps are scored again with
         the jaws closed exactly on it (:meth:`_rescore`). ``fallbacks``: (scene, target,
-        triangles) to plan an object on where its own give no grasp (a lying vessel opened at
-        its wider end). ``axes``: a placed mesh's height axis (camera frame),
+        triangles) to plan an object on where nothing on its own holds (a lying vessel opened
+        at its wider end). ``axes``: a placed mesh's height axis (camera frame),
         along which its fitted height may be off (default: the table normal). Returns (grasps,
         object messages)."""
         sets, messages = [], []
@@ -236,28 +238,37 @@ class Planner:
             planners.append(self.relaxed())
         for k in sorted(targets):
             axis = axes.get(k)
-            found, why = GraspSet.empty(), ""
+            tries = [(targets[k], scene, surfaces.get(k))]
+            if k in fallbacks:
+                other_scene, other_target, triangles = fallbacks[k]
+                tries.append((other_target, other_scene, triangles))
+            # down the ladder while nothing holds: the grasps whose best needs the least
+            # friction on the model (exact contacts where it was placed), the first that hold
+            found, why, need, exact = GraspSet.empty(), "", np.inf, True
             for planner in planners:
-                if len(found):
+                for target, cloud, triangles in tries:
+                    grasps, reason, mu = planner._object(k, target, cloud, plane, triangles, axis)
+                    why = why or reason
+                    if triangles is None:  # sampled contacts: held at the planner's friction
+                        mu = 0.0 if planner is self else planner.cfg.friction
+                    if len(grasps) and mu < need:
+                        found, need, exact = grasps, mu, triangles is not None
+                    if need <= self.cfg.friction:
+                        break
+                if need <= self.cfg.friction:
                     break
-                found, reason = planner._object(k, targets[k], scene, plane, surfaces.get(k),
-                                                axis)
-                why = why or reason
-                if len(found) == 0 and k in fallbacks:
-                    other_scene, other_target, triangles = fallbacks[k]
-                    found, _ = planner._object(k, other_target, other_scene, plane, triangles,
-                                               axis)
-                if len(found) and planner.cfg.friction > self.cfg.friction:
-                    messages.append(f"object {k}: nothing holds at friction {self.cfg.friction}"
-                                    f" on the model; grasps need up to {planner.cfg.friction}")
             if len(found) == 0:
                 messages.append(f"object {k}: no grasp ({why})")
+            elif need > self.cfg.friction:
+                messages.append(f"object {k}: nothing holds at friction {self.cfg.friction} on "
+                                f"the model; the best grasp needs "
+                                f"{'' if exact else 'up to '}{min(need, EXACT_MU_CAP):.2f}")
             sets.append(found)
         return GraspSet.concat(sets), messages
 
     def tightened(self) -> "Planner":
         """This planner with its opening and collision margins times ``tight_margins``, for
-        an object that gets no grasp with them: one nearly as wide as the opening (a lying
+        an object where nothing holds with them: one nearly as wide as the opening (a lying
         beaker 75.5 mm across, in the 80 mm opening less 2 x 4 mm) is better tried tight than
         not at all (study seed 5900 frame 0, 4 draws: held 0 -> 4 from the true masks, 0 -> 2
         with sr3d's; the 8 other objects without a grasp on seeds 4900-5900 stayed so)."""
@@ -277,7 +288,10 @@ class Planner:
 
     def _object(self, k: int, target: Cloud, scene: Cloud, plane: Plane,
                 surface: np.ndarray | None = None, axis: np.ndarray | None = None
-                ) -> tuple[GraspSet, str]:
+                ) -> tuple[GraspSet, str, float]:
+        """Grasps for object ``k``, a reason where there are none, and the friction the best
+        one's exact contacts on the placed model ``surface`` need (0 without one: its
+        sampled contacts held)."""
         cfg, g = self.cfg, self.gripper
         has_normal = np.linalg.norm(target.normals, axis=1) > 0.5
         target = target.select(has_normal)
@@ -297,7 +311,7 @@ class Planner:
         along = plane.normal if axis is None else axis
         end = (along, float((target.points @ along).max()))  # the top end: rim, neck
         sections = None if surface is None else Sections.of(surface, along)
-        grasps, pairs = GraspSet.empty(), 0
+        grasps, pairs, mu = GraspSet.empty(), 0, np.inf
         for _ in range(1 + cfg.redraws):
             R, c, span = self._frames(target, plane, rng)
             pairs += len(R)
@@ -316,11 +330,11 @@ class Planner:
             if mu <= cfg.friction:
                 break
         if pairs == 0:
-            return grasps, "no antipodal pair within the gripper's opening"
+            return grasps, "no antipodal pair within the gripper's opening", np.inf
         if len(grasps) == 0:
             return grasps, (f"no collision-free grasp inside the friction cone within the "
-                            f"{g.max_width:.3f} m opening")
-        return grasps.take(slice(0, cfg.top_k)), ""
+                            f"{g.max_width:.3f} m opening"), np.inf
+        return grasps.take(slice(0, cfg.top_k)), "", mu
 
     def score(self, mu: np.ndarray, width: np.ndarray, R: np.ndarray, centre: np.ndarray,
               plane: Plane, top: float, depth: np.ndarray,
