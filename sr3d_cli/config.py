@@ -156,6 +156,7 @@ class GraspConfig:
     approach_weight: float = 0.16
     centre_weight: float = 0.2
     run_scale: float = 0.02
+    junction_drop: float = 0.01
     end_weight: float = 0.2
     end_band: float = 0.005
 

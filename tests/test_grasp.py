@@ -683,6 +683,31 @@ def test_sections_measure_how_far_pads_stay_from_a_change_of_section():
     assert margin == pytest.approx([0.105, 0.05, 0.0], abs=0.0015)
 
 
+def test_a_run_ending_under_a_wider_part_ends_junction_drop_lower():
+    """``drop``: the stem's run ends that much lower under the bowl (carved models put the
+    junction too high), so the pads' best place moves down the stem; a bottle's body ends
+    under its narrower shoulder as it did, and a cylinder's top is no junction."""
+    down = np.array([0.0, 0.0, -1.0])
+    stem = Sections.of(np.asarray(_goblet().triangles), down)
+    heights = np.array([0.025, 0.03, 0.035, 0.04, 0.045])
+    pads = np.full(len(heights), 0.01)
+    plain = stem.margin(stem.height(_on_axis(heights)), pads, pads, 0.005)
+    dropped = stem.margin(stem.height(_on_axis(heights)), pads, pads, 0.005, 0.01)
+    # measured: 6, 11, 16, 14, 8 mm -> 6, 11, 9, 4, -2 mm: the upper end 10 mm lower
+    assert np.argmax(plain) == 2 and np.argmax(dropped) == 1
+    assert dropped[3:] == pytest.approx(plain[3:] - 0.01, abs=0.0015)
+    assert dropped[:2] == pytest.approx(plain[:2])
+    for solid in (revolve(np.array([(0, 0), (0.03, 0), (0.03, 0.1), (0.012, 0.13), (0.012, 0.17),
+                                    (0, 0.17)]), 64),
+                  trimesh.creation.cylinder(radius=0.03, height=0.12, sections=64)):
+        body = Sections.of(np.asarray(_on_table(solid).triangles), down)
+        heights = np.array([0.04, 0.06, 0.08])
+        pads = np.full(3, 0.01)
+        at = body.height(_on_axis(heights))
+        assert body.margin(at, pads, pads, 0.005, 0.01) == \
+            pytest.approx(body.margin(at, pads, pads, 0.005))
+
+
 def test_on_a_placed_model_the_centre_term_favours_the_middle_of_a_stem():
     """With a placed model, the centre term counts how far the pads stay inside their straight
     run (``run_scale``), not how near the centre is to half the object's height: on a goblet that

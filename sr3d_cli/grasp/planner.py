@@ -179,7 +179,7 @@ class Sections:
         return (points - self.origin) @ self.along
 
     def margin(self, h: np.ndarray, below: np.ndarray, above: np.ndarray,
-               end: float) -> np.ndarray:
+               end: float, drop: float = 0.0) -> np.ndarray:
         """How far pads from ``h - below`` to ``h + above`` (heights, clipped to the model)
         stay inside the straight run (a cylinder or a cone) around ``h``: the heights where the
         radius stays within :data:`RUN_TOLERANCE`, plus :data:`RUN_TAPER` per metre away, of
@@ -197,6 +197,10 @@ class Sections:
             RUN_TOLERANCE + RUN_TAPER * np.abs(dz)
         run_hi = np.where(off & (dz > 0), z[None], np.inf).min(axis=1)
         run_lo = np.where(off & (dz < 0), z[None], -np.inf).max(axis=1)
+        if drop > 0:  # a run ending under a wider part (a stem under a bowl) ends lower
+            i = np.minimum(np.searchsorted(z, run_hi), len(z) - 1)
+            wider = self.radius[i] > ref + slope * (z[i] - h)
+            run_hi = np.where(np.isfinite(run_hi) & wider, run_hi - drop, run_hi)
         run_hi = np.minimum(run_hi, top)
         run_lo = np.where(run_lo < self.h0 + end, -np.inf, run_lo)
         pad_hi = np.minimum(h + above, top)
@@ -367,8 +371,8 @@ class Planner:
         reach = up + centre @ along
         if sections is not None and cfg.run_scale > 0:
             down = self.gripper.finger_extent(R, width, depth, -along)
-            run = np.clip(sections.margin(sections.height(centre), down, up, cfg.end_band)
-                          / cfg.run_scale, 0, 1)
+            run = np.clip(sections.margin(sections.height(centre), down, up, cfg.end_band,
+                                          cfg.junction_drop) / cfg.run_scale, 0, 1)
             wall = _across_wall(centre, width, along, sections.origin)
             centred = np.where(wall, centred, run)
         at_end = reach > top_end - cfg.end_band
