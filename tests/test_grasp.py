@@ -741,10 +741,11 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
     pads' middle and every one fails the check. Measured over 10 seeds: the best grasp held
     the true (open) beaker at friction 0.5 for 10 with the margin along the axis, 4 along the
     table normal, none without the fallback. The slope margin, ``tight_margins`` and
-    ``fallback_friction`` are off here, to see these alone: with the slope margin, 7 of 10 along the axis (no pinch at this mouth, whose lip flares, holds turned 4
-    degrees, and the pick among those that fail is arbitrary; scoring a pinch that fails only
-    turned as one at the friction limit gave 9 here, but lost 5 object-draws over six study
-    seeds: see the README)."""
+    ``fallback_friction`` are off here, to see these alone: with the slope margin, 7 of 10
+    along the axis (no pinch at this mouth, whose lip flares, holds turned 4 degrees, and the
+    pick among those that fail is arbitrary; scoring a pinch that fails only turned as one at
+    the friction limit gave 9 here, but lost 5 object-draws over six study seeds: see the
+    README)."""
     r, h = 0.052, 0.09
     outer = [(0, 0), (r, 0), (r, h - 0.003), (1.04 * r, h)]
     axis = np.array([1.0, 0, 0])
