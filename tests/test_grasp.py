@@ -46,11 +46,14 @@ def _table_cloud(step: float = 0.004, half: float = 0.2) -> Cloud:
     return Cloud(pts, np.tile([0.0, 0.0, -1.0], (len(pts), 1)), np.zeros(len(pts), np.int64))
 
 
-def _plan(mesh: trimesh.Trimesh):
+def _plan(mesh: trimesh.Trimesh, **settings):
+    """Grasps for a lone mesh on the table, with these grasp settings changed."""
+    cfg = Config().grasp
+    for key, value in settings.items():
+        setattr(cfg, key, value)
     target = mesh_cloud(mesh, np.eye(4), 1.0, 1, 3000)
     scene = Cloud.concat([_table_cloud(), target])
-    planner = Planner(Config().grasp)
-    return planner.plan(scene, {1: target}, PLANE)
+    return Planner(cfg).plan(scene, {1: target}, PLANE)
 
 
 def _truth(meshes) -> TrueScene:
@@ -210,17 +213,12 @@ def test_an_object_just_under_the_opening_is_held_with_tight_margins():
     """75 mm across: with 4 mm either side the 80 mm opening is too small, with the margins
     halved (``tight_margins``) it fits, and the true scene holds the grasp."""
     drum = _on_table(trimesh.creation.cylinder(radius=0.0375, height=0.05, sections=96))
-    cfg = Config().grasp
-    target = mesh_cloud(drum, np.eye(4), 1.0, 1, 3000)
-    scene = Cloud.concat([_table_cloud(), target])
-    cfg.tight_margins = 0.0
-    grasps, messages = Planner(cfg).plan(scene, {1: target}, PLANE)
+    grasps, messages = _plan(drum, tight_margins=0.0)
     assert len(grasps) == 0 and "0.080 m opening" in messages[0]
-    cfg.tight_margins = 0.5
-    grasps, messages = Planner(cfg).plan(scene, {1: target}, PLANE)
+    grasps, messages = _plan(drum, tight_margins=0.5)
     assert not messages and len(grasps) >= 1
     assert np.all(grasps.widths <= GRIPPER.max_width)
-    assert np.all(grasps.widths >= 0.075 + 2 * 0.5 * cfg.width_margin - 1e-3)
+    assert np.all(grasps.widths >= 0.075 + 2 * 0.5 * Config().grasp.width_margin - 1e-3)
     summary = summarise(grasps, judge(grasps, _truth([drum]), GRIPPER), [1], friction=0.5)
     assert summary["top1"] == {"1": True}
 
@@ -233,14 +231,9 @@ def test_an_object_nothing_holds_on_at_the_friction_gets_its_best_grasp_flagged(
     slope = np.radians(30)
     cone = _on_table(revolve([(0, 0), (0.035, 0), (0.035 - 0.04 * np.tan(slope), 0.04),
                               (0, 0.04)], 96))
-    cfg = Config().grasp
-    target = mesh_cloud(cone, np.eye(4), 1.0, 1, 3000)
-    scene = Cloud.concat([_table_cloud(), target])
-    cfg.fallback_friction = 0.0
-    grasps, messages = Planner(cfg).plan(scene, {1: target}, PLANE)
+    grasps, messages = _plan(cone, fallback_friction=0.0)
     assert len(grasps) == 0 and "no grasp" in messages[0]
-    cfg.fallback_friction = 2.0
-    grasps, messages = Planner(cfg).plan(scene, {1: target}, PLANE)
+    grasps, messages = _plan(cone, fallback_friction=2.0)
     assert len(grasps) >= 1
     assert messages == ["object 1: nothing holds at friction 0.5 on the model; the best grasp "
                         "needs up to 2.00"]
