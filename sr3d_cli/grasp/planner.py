@@ -243,6 +243,8 @@ class Planner:
         planners = [self] + ([self.tightened()] if self.cfg.tight_margins > 0 else [])
         if self.cfg.fallback_friction > self.cfg.friction:
             planners.append(self.relaxed())
+        # each rung, and its brief look for an object that already has (failing) grasps
+        ladder = [(p, p if p is self else p.brief()) for p in planners]
         for k in sorted(targets):
             axis = axes.get(k)
             tries = [(targets[k], scene, surfaces.get(k))]
@@ -252,9 +254,8 @@ class Planner:
             # down the ladder while nothing holds: the grasps whose best needs the least
             # friction on the model (exact contacts where it was placed), the first that hold
             found, why, need, exact = GraspSet.empty(), "", np.inf, True
-            for planner in planners:
-                if planner is not self and len(found):  # grasps that fail: a brief look
-                    planner = planner.brief()
+            for full, short in ladder:
+                planner = short if len(found) else full
                 for target, cloud, triangles in tries:
                     grasps, reason, mu = planner._object(k, target, cloud, plane, triangles, axis)
                     why = why or reason
