@@ -202,6 +202,40 @@ def test_grasps_stay_where_the_camera_sees_the_object():
     assert records[0]["reason"] == "ok" and records[0]["mu"] <= 0.5
 
 
+@pytest.mark.parametrize("shape", ["box", "cylinder", "beaker"])
+def test_the_palms_shortcut_on_the_objects_own_points_drops_no_grasp(shape):
+    """A depth where the palm holds the object's own points is skipped before its section
+    is worked out: the full collision test would reject those frames as well, so the grasps
+    are the same with the shortcut off (no point counted as solid). The shortcut must also
+    be taken: at the deepest depth most frames' palms are inside the object."""
+    mesh = {"box": lambda: _on_table(trimesh.creation.box(extents=(0.05, 0.03, 0.08))),
+            "cylinder": lambda: _on_table(trimesh.creation.cylinder(radius=0.025, height=0.1,
+                                                                    sections=64)),
+            "beaker": _beaker}[shape]()
+    cfg = Config().grasp
+    planner, g, m = Planner(cfg), GRIPPER, cfg.collision_margin
+    target = mesh_cloud(mesh, np.eye(4), 1.0, 1, cfg.mesh_points)
+    scene = Cloud.concat([_table_cloud(), target])
+    top = float(PLANE.height(target.points).max())
+    end = (PLANE.normal, float((target.points @ PLANE.normal).max()))
+    R, c, span = planner._frames(target, PLANE, np.random.default_rng(0))
+    args = (1, R, c, span, target, scene, PLANE, top, end)
+    on = planner._try_frames(*args, solid=np.ones(len(target.points), bool))
+    off = planner._try_frames(*args, solid=np.zeros(len(target.points), bool))
+    assert on is not None and len(on) >= 10
+    assert len(on) == len(off)
+    for a, b in zip((on.scores, on.widths, on.depths, on.R, on.t),
+                    (off.scores, off.widths, off.depths, off.R, off.t)):
+        assert np.array_equal(a, b)
+    local = np.einsum("fji,fnj->fin", R, target.points[None] - c[:, None])
+    x, y, z = local[:, 0], local[:, 1], local[:, 2]
+    d = max(cfg.depths)
+    palm = (x > d - g.finger_length - g.palm_depth - m) & (x < d - g.finger_length + m) & \
+        (np.abs(y) < g.palm_width / 2 + m - g.max_width / 2) & \
+        (np.abs(z) < g.finger_height / 2 + m)
+    assert (palm.sum(axis=1) >= cfg.collision_points).mean() > 0.5
+
+
 def test_object_wider_than_the_gripper_gets_no_grasp():
     wide = _on_table(trimesh.creation.box(extents=(0.12, 0.12, 0.05)))
     grasps, messages = _plan(wide)

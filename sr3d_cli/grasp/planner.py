@@ -132,6 +132,7 @@ EXACT_FIRST = 3  # best grasps per object always scored by exact contacts (Plann
 EXACT_POOL = 3   # times top_k grasps the rescoring may reach into (Planner._object)
 THIN_PAIR = 3.0  # a pair shorter than this many pair radii spans a thin wall (Planner._frames)
 LATE_REDRAWS = 1  # redraws of a later rung for an object with failing grasps (Planner.brief)
+SURE = 1e-5  # m, kept from a box's faces where a test on other coordinates must agree
 CHUNK = 96  # frames tried at once (Planner._try_frames): 48 was ~7% slower, 192 no faster
 
 
@@ -316,11 +317,16 @@ class Planner:
             return GraspSet.empty(), f"{len(target.points)} surface points, too few"
         top = max(float(plane.height(target.points).max()), 1e-6)
         centre = target.points.mean(axis=0)
-        near = np.linalg.norm(scene.points - centre, axis=1) < \
-            g.reach() + np.ptp(target.points, axis=0).max()
-        # the table is checked exactly by the plane test; points at its height cannot be hit
-        # by a gripper that passes it
-        scene = scene.select(near & (plane.height(scene.points) >= cfg.clearance))
+        radius = g.reach() + np.ptp(target.points, axis=0).max()
+
+        def collides(points):
+            # near enough to touch; the table is checked exactly by the plane test, and points
+            # at its height cannot be hit by a gripper that passes it
+            return (np.linalg.norm(points - centre, axis=1) < radius) & \
+                (plane.height(points) >= cfg.clearance)
+
+        scene = scene.select(collides(scene.points))
+        solid = collides(target.points)  # the target's points among them (see _try_frames)
         # an object with few holdable places (a goblet's stem, a wide beaker's rim) may get no
         # seed on them: draw other seeds, up to ``redraws`` times, while nothing holds (with a
         # placed mesh: while the best grasp's exact contacts do not hold)
@@ -333,7 +339,7 @@ class Planner:
             R, c, span = self._frames(target, plane, rng)
             pairs += len(R)
             found = [self._try_frames(k, R[s:s + CHUNK], c[s:s + CHUNK], span[s:s + CHUNK],
-                                      target, scene, plane, top, end, sections)
+                                      target, scene, plane, top, end, sections, solid)
                      for s in range(0, len(R), CHUNK)]
             grasps = GraspSet.concat([grasps] + [f for f in found if f is not None])
             if len(grasps) == 0:
@@ -526,26 +532,25 @@ class Planner:
 
     def _y_bins(self, y: np.ndarray, bin_size: float = 0.001):
         """Bins along the closing direction for :meth:`_between_jaws`, from the slab points'
-        y (F, K), once per set of frames: (bin of each point, clipped to the jaws' reach; its
-        index among all frames' bins, or one past them when out of reach; bins per frame)."""
+        y (F, K), once per set of frames: (bin of each point, clipped to the jaws' reach;
+        whether it is within reach; bins per frame)."""
         g = self.gripper
         reach = g.max_width + g.finger_thickness
         nb = int(np.ceil(2 * reach / bin_size))
         b = np.clip(((y + reach) / bin_size).astype(np.int64), 0, nb - 1)
-        flat = np.where(np.abs(y) < reach, b + nb * np.arange(len(y))[:, None], nb * len(y))
-        return b, flat, nb
+        return b, np.abs(y) < reach, nb
 
     def _between_jaws(self, bins, slab: np.ndarray, span: np.ndarray,
                       bin_size: float = 0.001) -> np.ndarray:
         """Which slab points the jaws enclose: from the seed pair (+-span/2) outwards on each
         side, up to the first empty gap a finger fits in. bins: :meth:`_y_bins` of the points'
-        y; slab : (F, K); span : (F,)."""
+        y, of the same rows; slab : (F, K); span : (F,)."""
         g = self.gripper
-        b, flat, nb = bins
+        b, within, nb = bins
         F = len(slab)
         reach = g.max_width + g.finger_thickness
         occ = np.zeros(nb * F + 1, bool)
-        occ[np.where(slab, flat, nb * F).ravel()] = True
+        occ[np.where(slab & within, b + nb * np.arange(F)[:, None], nb * F).ravel()] = True
         occ = occ[:-1].reshape(F, nb)
         gap = max(int(np.ceil(g.finger_thickness / bin_size)), 1)
         csum = np.concatenate([np.zeros((F, 1), np.int64), np.cumsum(occ, 1)], 1)
@@ -562,21 +567,25 @@ class Planner:
         return (b > edge_lo[:, None]) & (b < edge_hi[:, None])
 
     def _try_frames(self, k, R, c, span, target: Cloud, scene: Cloud, plane: Plane, top: float,
-                    end: tuple[np.ndarray, float], sections: Sections | None = None
-                    ) -> GraspSet | None:
+                    end: tuple[np.ndarray, float], sections: Sections | None = None,
+                    solid: np.ndarray | None = None) -> GraspSet | None:
         """The best depth of each frame that holds: the object's section between the jaws (see
-        :meth:`_between_jaws`) sets the opening; fingers and palm, inflated by
-        ``collision_margin``, hold fewer than ``collision_points`` scene points and clear the
-        table; both contacts lie inside the friction cone."""
+        :meth:`_between_jaws`) sets the opening, centred within half the largest opening of
+        the seed pair's midpoint; fingers and palm, inflated by ``collision_margin``, hold
+        fewer than ``collision_points`` scene points and clear the table; both contacts lie
+        inside the friction cone. ``solid``: which target points are also in ``scene``
+        (default all, as :meth:`plan` is given them): at a depth where the palm holds enough
+        of them, wherever the opening centres it, a frame is not tried further."""
         cfg, g = self.cfg, self.gripper
-        L, H = g.finger_length, g.finger_height
+        L = g.finger_length
         # only points that some depth's finger slab can hold matter: find them from their
         # approach (x) and height (z) coordinates, pack them to the front of each row, and cut
         # the rows to the longest such list
         m = cfg.collision_margin
         local_t = to_local(R, c, target.points)                   # (F, 3, M)
         x, z = local_t[:, 0], local_t[:, 2]
-        can = (np.abs(z) < H / 2 + m) & (x > min(cfg.depths) - L - m) & (x < max(cfg.depths) + m)
+        can = (np.abs(z) < g.finger_height / 2 + m) & (x > min(cfg.depths) - L - m) & \
+            (x < max(cfg.depths) + m)
         keep = max(int(can.sum(axis=1).max()), 1)
         order = np.argsort(~can, axis=1, kind="stable")[:, :keep]  # (F, K)
         can = np.take_along_axis(can, order, 1)
@@ -587,30 +596,49 @@ class Planner:
                                 target.normals.astype(np.float32)[order].transpose(0, 2, 1)], 1)
         x, y, z, ny = local[:, 0], local[:, 1], local[:, 2], local[:, 4]
         bins = self._y_bins(y)
+        # the palm's test on the object's own points, where it holds them at any centring
+        # (the opening is centred within max_width / 2): a frame whose palm is inside the
+        # object at a depth (most, at the deeper ones) skips that depth's section work
+        behind = can & (np.abs(y) < g.palm_width / 2 + m - g.max_width / 2 - SURE) & \
+            (np.abs(z) < g.palm_height / 2 + m - SURE)
+        if solid is not None:
+            behind &= solid[order]
         # scene points in each frame's coordinates, filled in as frames reach the collision test
         local_s = np.empty((len(R), 3, len(scene.points)), np.float32)
         seen = np.zeros(len(R), bool)
         best = np.full(len(R), -1.0)
         out = np.zeros((len(R), 4))                               # width, depth, ymid, score
         for depth in sorted(cfg.depths, reverse=True):
+            rows = np.flatnonzero(best < 0)
+            xr = x[rows]
+            palm = behind[rows] & (xr > depth - L - g.palm_depth - m + SURE) & \
+                (xr < depth - L + m - SURE)
+            free = palm.sum(axis=1) < cfg.collision_points
+            rows, xr = rows[free], xr[free]
+            if len(rows) == 0:
+                continue
+            yr = y[rows]
             # the section under the (inflated) finger pads
-            slab = can & (x > depth - L - m) & (x < depth + m) & (np.abs(z) < H / 2 + m)
-            slab &= self._between_jaws(bins, slab, span)
+            slab = can[rows] & (xr > depth - L - m) & (xr < depth + m)
+            slab &= self._between_jaws(tuple(a[rows] if i < 2 else a for i, a in
+                                             enumerate(bins)), slab, span[rows])
             count = slab.sum(axis=1)
-            y_lo = np.where(slab, y, np.inf).min(axis=1)
-            y_hi = np.where(slab, y, -np.inf).max(axis=1)
+            y_lo = np.where(slab, yr, np.inf).min(axis=1)
+            y_hi = np.where(slab, yr, -np.inf).max(axis=1)
             width = (y_hi - y_lo) + 2 * cfg.width_margin
-            ok = (count >= 3) & (width <= g.max_width) & (best < 0)
+            ymid = np.where(count > 0, (y_hi + y_lo) / 2, 0.0)
+            ok = (count >= 3) & (width <= g.max_width) & (np.abs(ymid) <= g.max_width / 2)
             if not ok.any():
                 continue
-            ymid = np.where(ok, (y_hi + y_lo) / 2, 0.0)
-            width = np.where(ok, width, g.max_width)
+            rows, slab, yr = rows[ok], slab[ok], yr[ok]
+            y_lo, y_hi, width, ymid = y_lo[ok], y_hi[ok], width[ok], ymid[ok]
             # contact normals: the outermost slab points on each side
             # (of surfaces facing each finger: across a thin wall, the inner surface's points
             # lie in the band too, facing the other way)
-            left = slab & (y < y_lo[:, None] + cfg.contact_band) & (ny < 0)
-            right = slab & (y > y_hi[:, None] - cfg.contact_band) & (ny > 0)
-            sums = local @ np.stack([left, right], 2).astype(np.float32)  # (F, 6, 2)
+            nyr = ny[rows]
+            left = slab & (yr < y_lo[:, None] + cfg.contact_band) & (nyr < 0)
+            right = slab & (yr > y_hi[:, None] - cfg.contact_band) & (nyr > 0)
+            sums = local[rows] @ np.stack([left, right], 2).astype(np.float32)  # (f, 6, 2)
             n_left, n_right = _unit(sums[:, 3:, 0]), _unit(sums[:, 3:, 1])
             # the line between the two contact patches (their centroids)
             c_left = sums[:, :3, 0] / np.maximum(left.sum(1), 1)[:, None]
@@ -619,33 +647,34 @@ class Planner:
             ang = np.maximum(np.arccos(np.clip(-np.sum(n_left * line, 1), -1, 1)),
                              np.arccos(np.clip(np.sum(n_right * line, 1), -1, 1)))
             mu_needed = np.tan(np.minimum(ang, np.radians(89.9)))
-            ok &= mu_needed <= cfg.friction
+            ok = mu_needed <= cfg.friction
             if not ok.any():
                 continue
             # the table first (cheap, and half the survivors fail it), then the scene points
-            idx = np.flatnonzero(ok)
-            centre = c[idx] + R[idx, :, 1] * ymid[idx, None]
-            dd = np.full(len(idx), depth)
-            clear = g.lowest(R[idx], centre, width[idx], dd, plane) >= cfg.clearance
-            idx, centre, dd = idx[clear], centre[clear], dd[clear]
-            if len(idx) == 0:
+            rows, width, ymid, mu_needed = rows[ok], width[ok], ymid[ok], mu_needed[ok]
+            centre = c[rows] + R[rows, :, 1] * ymid[:, None]
+            dd = np.full(len(rows), depth)
+            clear = g.lowest(R[rows], centre, width, dd, plane) >= cfg.clearance
+            rows, width, ymid, mu_needed = rows[clear], width[clear], ymid[clear], mu_needed[clear]
+            centre, dd = centre[clear], dd[clear]
+            if len(rows) == 0:
                 continue
-            fresh = idx[~seen[idx]]          # scene points turned into each frame once
+            fresh = rows[~seen[rows]]          # scene points turned into each frame once
             if len(fresh):
                 local_s[fresh] = to_local(R[fresh], c[fresh], scene.points)
                 seen[fresh] = True
-            boxes = g.boxes(width[idx], dd)                       # (f, 3, 2, 3)
-            boxes[..., 1] += ymid[idx, None, None]                # centred between the jaws
-            hits = count_inside(local_s[idx], boxes, shrink=-cfg.collision_margin).max(axis=1)
+            boxes = g.boxes(width, dd)                            # (f, 3, 2, 3)
+            boxes[..., 1] += ymid[:, None, None]                  # centred between the jaws
+            hits = count_inside(local_s[rows], boxes, shrink=-cfg.collision_margin).max(axis=1)
             free = hits < cfg.collision_points
-            idx, centre, dd = idx[free], centre[free], dd[free]
-            best[idx] = self.score(mu_needed[idx], width[idx], R[idx], centre, plane, top, dd,
-                                   end, sections)
-            out[idx] = np.stack([width[idx], dd, ymid[idx], best[idx]], 1)
+            rows, width, ymid, mu_needed = rows[free], width[free], ymid[free], mu_needed[free]
+            best[rows] = self.score(mu_needed, width, R[rows], centre[free], plane, top,
+                                    dd[free], end, sections)
+            out[rows] = np.stack([width, dd[free], ymid, best[rows]], 1)
         keep = best >= 0
         if not keep.any():
             return None
         n = int(keep.sum())
         w, d, ymid, score = out[keep].T
         centre = c[keep] + R[keep][:, :, 1] * ymid[:, None]
-        return GraspSet(score, w, np.full(n, H), d, R[keep], centre, np.full(n, k, np.int64))
+        return GraspSet(score, w, np.full(n, g.finger_height), d, R[keep], centre, np.full(n, k, np.int64))
