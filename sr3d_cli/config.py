@@ -133,13 +133,13 @@ class GraspConfig:
     friction: float = 0.5
     width_margin: float = 0.004
     clearance: float = 0.003
-    seeds: int = 64
+    seeds: int = 80
     seed_bins: int = 12
     seed: int = 0
     redraws: int = 6
     height_tolerance: float = 0.004
     tilt_tolerance: float = 4.0
-    approaches: int = 7
+    approaches: int = 5
     pair_radius: float = 0.004
     contact_band: float = 0.002
     collision_points: int = 3

@@ -195,9 +195,11 @@ def test_grasps_stay_where_the_camera_sees_the_object():
         grasps, _ = Planner(cfg).plan(scene, {1: target}, PLANE)
         best[name] = grasps.sorted().take(slice(0, 5))
     # measured: the whole mesh's best grasp sits at 0.84 of the height, 141 px right of the
-    # centre; held where seen, the top five lie within 114 px and 0.40 of the height
+    # centre; held where seen, the top five lie within 121 px and 0.55 of the height (114 px
+    # and 0.40 with session 50's 64 seeds and 7 approaches), the best at 113 px and 0.34
     assert project(best["all"].t[:1], K)[0, 0] > shape[1] - 1
-    assert (project(best["seen"].t, K)[:, 0] < shape[1] - 1 - 10).all()
+    assert (project(best["seen"].t, K)[:, 0] < shape[1] - 1 - 5).all()
+    assert project(best["seen"].t[:1], K)[0, 0] < shape[1] - 1 - 15
     records = judge(best["seen"].take(slice(0, 1)), _truth([cyl]), GRIPPER)
     assert records[0]["reason"] == "ok" and records[0]["mu"] <= 0.5
 
@@ -303,13 +305,17 @@ def test_a_wall_with_no_partner_across_the_vessel_closes_along_its_normal():
     """A 9 cm beaker's wall (2.5 mm) has no far partner within the 8 cm opening, so its one pair
     is the near one, a few millimetres long and up to ``pair_radius`` off the normal: its own
     line points anywhere. Measured on the wall's frames: closing within 8 degrees of across the
-    wall 46% by the pair's line (median 24.5 degrees off), 100% by the normals (0.6)."""
+    wall 46% by the pair's line (median 24.5 degrees off), 100% by the normals (0.6). The only
+    long pairs at the wall's heights run down the wall, from the rim's top to the base under
+    it (the 75 mm height fits the opening)."""
     beaker = _beaker(0.045, 0.075, 0.0025)
     target = mesh_cloud(beaker, np.eye(4), 1.0, 1, 2400)
     R, c, span = Planner(Config().grasp)._frames(target, PLANE, np.random.default_rng(0))
     height = PLANE.height(c)
-    wall = (height > 0.01) & (height < 0.065)
-    assert wall.sum() > 100 and np.all(span[wall] < 0.01)
+    band = (height > 0.01) & (height < 0.065)
+    wall, down = band & (span < 0.01), band & (span >= 0.01)
+    assert wall.sum() > 100
+    assert np.all(np.abs(R[down, :, 1] @ PLANE.normal) > 0.99)
     radial = c[wall, :2] / np.linalg.norm(c[wall, :2], axis=1, keepdims=True)
     across = np.abs(np.einsum("fk,fk->f", R[wall, :2, 1], radial))
     assert np.mean(across > np.cos(np.radians(8))) > 0.95
@@ -363,6 +369,7 @@ def test_seeds_spread_along_the_object_find_a_thin_stem():
         for seed in range(10):
             cfg = Config().grasp
             cfg.seeds, cfg.seed, cfg.redraws, cfg.seed_bins = 8, seed, 0, bins
+            cfg.approaches = 7  # as measured (with the default 5, 6 of 10 along the length)
             grasps, _ = Planner(cfg).plan(scene, {1: target}, PLANE)
             if len(grasps):
                 held[bins] += 1
@@ -772,7 +779,8 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
     along the axis (no pinch at this mouth, whose lip flares, holds turned 4 degrees, and the
     pick among those that fail is arbitrary; scoring a pinch that fails only turned as one at
     the friction limit gave 9 here, but lost 5 object-draws over six study seeds: see the
-    README)."""
+    README). Those counts are with 64 seeds and 7 approaches, which this test keeps: with
+    session 51's 80 and 5 the table normal also holds 10 of 10 here (the axis, 10)."""
     r, h = 0.052, 0.09
     outer = [(0, 0), (r, 0), (r, h - 0.003), (1.04 * r, h)]
     axis = np.array([1.0, 0, 0])
@@ -798,6 +806,7 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
         cfg.tilt_tolerance = 0.0
         cfg.fallback_friction = 0.0  # the closed model's rim gives grasps above 0.5
         cfg.tight_margins = 0.0  # tight margins hold 9 of 10 along the table normal too
+        cfg.seeds, cfg.approaches = 64, 7  # as measured (see above)
         planner = Planner(cfg)
         if seed < 3:
             alone, messages = planner.plan(scene, {1: target}, PLANE, surfaces)
