@@ -595,7 +595,7 @@ class Planner:
                                 R.transpose(0, 2, 1).astype(np.float32) @
                                 target.normals.astype(np.float32)[order].transpose(0, 2, 1)], 1)
         x, y, z, ny = local[:, 0], local[:, 1], local[:, 2], local[:, 4]
-        bins = self._y_bins(y)
+        b, within, nb = self._y_bins(y)
         # the palm's test on the object's own points, where it holds them at any centring
         # (the opening is centred within max_width / 2): a frame whose palm is inside the
         # object at a depth (most, at the deeper ones) skips that depth's section work
@@ -620,8 +620,7 @@ class Planner:
             yr = y[rows]
             # the section under the (inflated) finger pads
             slab = can[rows] & (xr > depth - L - m) & (xr < depth + m)
-            slab &= self._between_jaws(tuple(a[rows] if i < 2 else a for i, a in
-                                             enumerate(bins)), slab, span[rows])
+            slab &= self._between_jaws((b[rows], within[rows], nb), slab, span[rows])
             count = slab.sum(axis=1)
             y_lo = np.where(slab, yr, np.inf).min(axis=1)
             y_hi = np.where(slab, yr, -np.inf).max(axis=1)
@@ -677,4 +676,5 @@ class Planner:
         n = int(keep.sum())
         w, d, ymid, score = out[keep].T
         centre = c[keep] + R[keep][:, :, 1] * ymid[:, None]
-        return GraspSet(score, w, np.full(n, g.finger_height), d, R[keep], centre, np.full(n, k, np.int64))
+        return GraspSet(score, w, np.full(n, g.finger_height), d, R[keep], centre,
+                        np.full(n, k, np.int64))
