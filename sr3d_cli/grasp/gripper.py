@@ -34,8 +34,8 @@ class Gripper:
         """Axis-aligned boxes ``(..., 3, 2, 3)`` (left finger, right finger, palm; lower and
         upper corner) in the grasp frame for openings ``width`` and depths ``depth`` (arrays
         broadcast together)."""
-        w = np.asarray(width, dtype=np.float64)[..., None]
-        d = np.asarray(depth, dtype=np.float64)[..., None]
+        w, d = (a[..., None] for a in np.broadcast_arrays(np.asarray(width, dtype=np.float64),
+                                                           np.asarray(depth, dtype=np.float64)))
         L, T, H = self.finger_length, self.finger_thickness, self.finger_height
         one = np.ones_like(w + d)
         left = np.stack([np.concatenate([d - L, -w / 2 - T, -H / 2 * one], -1),

@@ -360,7 +360,7 @@ class Planner:
         return grasps.take(slice(0, cfg.top_k)), "", (0.0 if surface is None else mu)
 
     def score(self, mu: np.ndarray, width: np.ndarray, R: np.ndarray, centre: np.ndarray,
-              plane: Plane, top: float, depth: np.ndarray,
+              plane: Plane, top: float, depth: float | np.ndarray,
               end: tuple[np.ndarray, float], sections: Sections | None = None) -> np.ndarray:
         """Grasp scores: friction margin (``mu``: the least coefficient that holds), opening
         margin, approach from above, and a centre near half the object's height (``top``: its
@@ -652,24 +652,24 @@ class Planner:
             # the table first (cheap, and half the survivors fail it), then the scene points
             rows, width, ymid, mu_needed = rows[ok], width[ok], ymid[ok], mu_needed[ok]
             centre = c[rows] + R[rows, :, 1] * ymid[:, None]
-            dd = np.full(len(rows), depth)
-            clear = g.lowest(R[rows], centre, width, dd, plane) >= cfg.clearance
-            rows, width, ymid, mu_needed = rows[clear], width[clear], ymid[clear], mu_needed[clear]
-            centre, dd = centre[clear], dd[clear]
+            clear = g.lowest(R[rows], centre, width, depth, plane) >= cfg.clearance
+            rows, width, ymid, mu_needed, centre = (a[clear] for a in
+                                                    (rows, width, ymid, mu_needed, centre))
             if len(rows) == 0:
                 continue
             fresh = rows[~seen[rows]]          # scene points turned into each frame once
             if len(fresh):
                 local_s[fresh] = to_local(R[fresh], c[fresh], scene.points)
                 seen[fresh] = True
-            boxes = g.boxes(width, dd)                            # (f, 3, 2, 3)
+            boxes = g.boxes(width, depth)                         # (f, 3, 2, 3)
             boxes[..., 1] += ymid[:, None, None]                  # centred between the jaws
             hits = count_inside(local_s[rows], boxes, shrink=-cfg.collision_margin).max(axis=1)
             free = hits < cfg.collision_points
-            rows, width, ymid, mu_needed = rows[free], width[free], ymid[free], mu_needed[free]
-            best[rows] = self.score(mu_needed, width, R[rows], centre[free], plane, top,
-                                    dd[free], end, sections)
-            out[rows] = np.stack([width, dd[free], ymid, best[rows]], 1)
+            rows, width, ymid, mu_needed, centre = (a[free] for a in
+                                                    (rows, width, ymid, mu_needed, centre))
+            best[rows] = self.score(mu_needed, width, R[rows], centre, plane, top, depth, end,
+                                    sections)
+            out[rows] = np.stack([width, np.full(len(rows), depth), ymid, best[rows]], 1)
         keep = best >= 0
         if not keep.any():
             return None
