@@ -49,10 +49,12 @@ class SegmentConfig:
     rough_factor: float = 2.0
     grabcut_iterations: int = 4
     max_object_share: float = 0.25
+    min_score: float = 0.3
     import_dir: str = ""
     sam_encoder: str = ""
     sam_decoder: str = ""
     boxes: str = ""
+    points: str = ""
 
 
 @dataclass

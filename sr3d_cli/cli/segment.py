@@ -18,11 +18,22 @@ from sr3d_cli.errors import InputError
               help="Folder of masks made elsewhere (<frame>.png; implies --backend import).")
 @click.option("--boxes", type=click.Path(exists=True), default=None,
               help="Boxes JSON (or folder) prompting SAM instead of the training-free boxes.")
+@click.option("--points", type=click.Path(exists=True), default=None,
+              help="Points JSON (or folder), one object per point, prompting SAM.")
+@click.option("--preview", is_flag=True,
+              help="Also write masks/<frame>_preview.png: the instances with their scores.")
 @batch_options
 @scene_options
 @common_options
-def segment(scene, backend, prompt, import_dir, boxes, batch, out, frames, fmt):
-    """Write masks/<frame>.png (instance ids) and masks/<frame>.json (label, score, bbox)."""
+def segment(scene, backend, prompt, import_dir, boxes, points, preview, batch, out, frames, fmt):
+    """Write masks/<frame>.png (instance ids) and masks/<frame>.json (label, score, bbox).
+
+    Instances scored below segment.min_score are dropped.
+
+    Example: sr3d segment my_scene --preview
+    """
+    from sr3d_cli.io.atomic import write_png
+    from sr3d_cli.io.preview import instances_preview
     from sr3d_cli.segment import Segmenter
     from sr3d_cli.stages import write_instances
 
@@ -30,7 +41,7 @@ def segment(scene, backend, prompt, import_dir, boxes, batch, out, frames, fmt):
         backend = "import"
     cfg = load_config({"segment.backend": backend, "segment.prompt": prompt,
                        "segment.import_dir": import_dir, "segment.boxes": boxes,
-                       "io.format": fmt})
+                       "segment.points": points, "io.format": fmt})
     try:
         segmenter = Segmenter(cfg.segment, cfg.plane)
     except InputError as exc:
@@ -39,6 +50,9 @@ def segment(scene, backend, prompt, import_dir, boxes, batch, out, frames, fmt):
     def work(frame):
         instances = segmenter(frame.frame_id, frame.rgb, frame.depth_m, frame.camera.K)
         write_instances(frame.scene, frame.frame_id, instances, cfg.segment.backend)
+        if preview:
+            write_png(frame.scene.output_path("masks", frame.frame_id, "_preview.png"),
+                      instances_preview(frame.rgb, instances.ids, instances.objects))
         return [] if instances.objects else ["no transparent object found"]
 
     run_frames("segment", scene, cfg, out, frames, work, batch=batch,

@@ -11,10 +11,12 @@ import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from sr3d_cli.config import PlaneConfig, SegmentConfig
 from sr3d_cli.errors import InputError
+from sr3d_cli.geometry.camera import Camera
 from sr3d_cli.geometry.plane import Plane, fit_support_plane
 from sr3d_cli.io import images
 
@@ -63,20 +65,65 @@ def support_plane(depth_m: np.ndarray, K: np.ndarray, cfg: PlaneConfig,
                              min_share=cfg.min_share, exclude=exclude)
 
 
-def read_boxes(path: Path, frame_id: str) -> list[list[float]]:
-    """Boxes for a frame from a JSON file ``{frame_id: [[x0, y0, x1, y1], ...]}`` or a folder
-    of ``<frame_id>.json`` files holding such a list (or ``{"boxes": [...]}``)."""
+WORK_WIDTH = 640  # pixels: a frame is segmented reduced by the whole factor floor(W / 640) (1280
+# px: half size), as the segmenter's pixel constants (closing radius, GrabCut margins) are set for
+# VGA-sized frames
+
+
+def to_working_size(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The frame reduced by the whole factor ``W // WORK_WIDTH`` (none below 1280 px across).
+
+    rgb : (H, W, 3) uint8; depth_m : (H, W) metres (0 = none); K : (3, 3).
+    Returns (rgb, depth_m, K) at (H/f, W/f): colour averaged, depth the nearest reading (a hole
+    stays a hole), K for the smaller image (pixel centres at integer coordinates).
+    """
+    h, w = depth_m.shape
+    factor = w // WORK_WIDTH
+    if factor <= 1:
+        return rgb, depth_m, K
+    size = (w // factor, h // factor)
+    small_rgb = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
+    small_depth = depth_m[factor // 2::factor, factor // 2::factor][:size[1], :size[0]]
+    small_K = Camera(K, w, h).scaled(w // factor, h // factor).K
+    return small_rgb, np.ascontiguousarray(small_depth), small_K
+
+
+def to_full_size(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A working-size mask ``(h, w) bool`` brought back to the frame's ``shape`` (smoothly
+    interpolated, then cut at one half, so the outline does not come back as steps)."""
+    if mask.shape == tuple(shape):
+        return mask
+    big = cv2.resize(mask.astype(np.float32), (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR)
+    return big >= 0.5
+
+
+def read_prompts(path: Path, frame_id: str, kind: str = "boxes") -> list[list[float]]:
+    """Prompts for a frame from a JSON file ``{frame_id: [...], ...}`` or a folder of
+    ``<frame_id>.json`` files holding such a list (or ``{"boxes": [...]}`` / ``{"points": [...]}``).
+
+    kind : ``boxes`` (each ``[x0, y0, x1, y1]``) or ``points`` (each ``[x, y]``), pixels.
+    A frame the file does not name has no prompts.
+    """
+    width = {"boxes": 4, "points": 2}[kind]
     file = path / f"{frame_id}.json" if path.is_dir() else path
+    if path.is_dir() and not file.is_file():
+        return []
     try:
         data = json.loads(file.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
-        raise InputError(file, f"cannot read boxes JSON ({exc})") from None
+        raise InputError(file, f"cannot read {kind} JSON ({exc})") from None
     if isinstance(data, dict):
-        data = data.get("boxes", data.get(frame_id, []))
-    boxes = np.asarray(data, dtype=np.float64) if data else np.zeros((0, 4))
-    if boxes.ndim != 2 or boxes.shape[1] != 4:
-        raise InputError(file, f"boxes for frame {frame_id} must be a list of [x0, y0, x1, y1]")
-    return boxes.tolist()
+        data = data.get(kind, data.get(frame_id, []))
+    try:
+        prompts = np.asarray(data, dtype=np.float64) if data else np.zeros((0, width))
+    except (TypeError, ValueError):
+        prompts = np.zeros((0, 0))
+    layout = "[x0, y0, x1, y1]" if kind == "boxes" else "[x, y]"
+    if prompts.ndim != 2 or prompts.shape[1] != width or not np.isfinite(prompts).all():
+        raise InputError(file, f"{kind} for frame {frame_id} must be a list of {layout} numbers")
+    return prompts.tolist()
+
 
 
 def import_masks(folder: Path, frame_id: str, shape: tuple[int, int], label: str,
@@ -113,12 +160,14 @@ class Segmenter:
         from sr3d_cli.segment.training_free import segment_training_free
 
         c = self.cfg
-        plane = support_plane(depth_m, K, self.plane_cfg)
-        found = segment_training_free(rgb, depth_m, K, plane, rough_factor=c.rough_factor,
+        shape = depth_m.shape
+        rgb_w, depth_w, K_w = to_working_size(rgb, depth_m, K)
+        plane = support_plane(depth_w, K_w, self.plane_cfg)
+        found = segment_training_free(rgb_w, depth_w, K_w, plane, rough_factor=c.rough_factor,
                                       min_area=c.min_area, close_radius=c.close_radius,
                                       grabcut_iterations=c.grabcut_iterations,
                                       max_object_share=c.max_object_share)
-        return [f.mask for f in found], [f.score for f in found]
+        return [to_full_size(f.mask, shape) for f in found], [f.score for f in found]
 
     def __call__(self, frame_id: str, rgb: np.ndarray, depth_m: np.ndarray,
                  K: np.ndarray) -> Instances:
@@ -131,17 +180,31 @@ class Segmenter:
             return import_masks(Path(c.import_dir), frame_id, shape, label, c.min_area)
         if c.backend == "training-free":
             masks, scores = self.default(rgb, depth_m, K)
-            return from_masks(masks, scores, shape, label, c.min_area)
-        # sam-onnx: boxes from the user, else from the training-free backend
-        if c.boxes:
-            boxes = read_boxes(Path(c.boxes), frame_id)
         else:
-            masks, _ = self.default(rgb, depth_m, K)
-            boxes = [bbox(m) for m in masks]
+            masks, scores = self.prompted(frame_id, rgb, depth_m, K)
+        kept = [(m, s) for m, s in zip(masks, scores) if s >= c.min_score]
+        out = from_masks([m for m, _ in kept], [s for _, s in kept], shape, label, c.min_area)
+        dropped = len(masks) - len(kept)
+        if dropped:
+            out.notes.append(f"dropped {dropped} instance(s) scored below segment.min_score "
+                             f"{c.min_score:g}")
+        return out
+
+    def prompted(self, frame_id: str, rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray
+                 ) -> tuple[list[np.ndarray], list[float]]:
+        """SAM's masks and predicted IoUs, one per prompt: the user's points, else the user's
+        boxes, else the boxes of the training-free backend's instances."""
+        c = self.cfg
+        shape = depth_m.shape
         embedding, scale = self.sam.embed(rgb)
-        masks, scores = [], []
-        for box in boxes:
-            mask, score = self.sam.segment_box(embedding, scale, np.asarray(box), shape)
-            masks.append(mask)
-            scores.append(score)
-        return from_masks(masks, scores, shape, label, c.min_area)
+        if c.points:
+            points = read_prompts(Path(c.points), frame_id, "points")
+            found = [self.sam.segment_point(embedding, scale, np.asarray(p), shape)
+                     for p in points]
+        else:
+            if c.boxes:
+                boxes = read_prompts(Path(c.boxes), frame_id, "boxes")
+            else:
+                boxes = [bbox(m) for m in self.default(rgb, depth_m, K)[0]]
+            found = [self.sam.segment_box(embedding, scale, np.asarray(b), shape) for b in boxes]
+        return [m for m, _ in found], [s for _, s in found]

@@ -1,4 +1,4 @@
-"""Segment Anything through onnxruntime, prompted with boxes.
+"""Segment Anything through onnxruntime, prompted with boxes or points.
 
 Tensors of the standard export (the SAM repository's ``export_onnx_model`` decoder and an encoder
 exported beside it):
@@ -6,7 +6,7 @@ exported beside it):
 - encoder: image ``(1, 3, 1024, 1024)`` float32, RGB normalised with ImageNet mean/std, longest
   side resized to 1024 and zero-padded bottom/right -> ``image_embeddings (1, 256, 64, 64)``;
 - decoder: ``image_embeddings``, ``point_coords (1, N, 2)`` in the resized frame,
-  ``point_labels (1, N)`` (box corners 2 and 3, padding point -1), ``mask_input (1, 1, 256, 256)``,
+  ``point_labels (1, N)`` (foreground point 1, box corners 2 and 3, padding point -1), ``mask_input (1, 1, 256, 256)``,
   ``has_mask_input (1,)``, ``orig_im_size (2,)`` -> ``masks (1, M, H, W)`` logits at the original
   size, ``iou_predictions (1, M)``, ``low_res_masks``.
 """
@@ -56,7 +56,19 @@ class SamOnnx:
         """Mask ``(H, W) bool`` and predicted IoU for a box ``[x0, y0, x1, y1]`` (pixels)."""
         x0, y0, x1, y1 = (float(v) for v in box)
         coords = np.array([[[x0, y0], [x1, y1], [0.0, 0.0]]], np.float32) * scale
-        labels = np.array([[2, 3, -1]], np.float32)
+        return self.decode(embedding, coords, np.array([[2, 3, -1]], np.float32), shape)
+
+    def segment_point(self, embedding: np.ndarray, scale: float, point: np.ndarray,
+                      shape: tuple[int, int]) -> tuple[np.ndarray, float]:
+        """Mask ``(H, W) bool`` and predicted IoU for one foreground point ``[x, y]`` (pixels)."""
+        x, y = (float(v) for v in point)
+        coords = np.array([[[x, y], [0.0, 0.0]]], np.float32) * scale
+        return self.decode(embedding, coords, np.array([[1, -1]], np.float32), shape)
+
+    def decode(self, embedding: np.ndarray, coords: np.ndarray, labels: np.ndarray,
+               shape: tuple[int, int]) -> tuple[np.ndarray, float]:
+        """The decoder's best mask ``(H, W) bool`` and its predicted IoU for prompts ``coords``
+        ``(1, N, 2)`` (resized frame) with ``labels`` ``(1, N)``."""
         out = self.decoder.run({
             "image_embeddings": embedding.astype(np.float32), "point_coords": coords,
             "point_labels": labels, "mask_input": np.zeros((1, 1, 256, 256), np.float32),

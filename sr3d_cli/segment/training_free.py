@@ -22,7 +22,11 @@ The steps:
    pixels apart, whose gap the closing filled), or between groups of its readings that stand
    apart on the table (one object behind another), kept split only where solids of revolution
    on the table explain the parts clearly better than the whole (the revolution fit of
-   :mod:`sr3d_cli.reconstruct.revolution_fit`).
+   :mod:`sr3d_cli.reconstruct.revolution_fit`);
+7. instances that are too small or too large to be an object on the table dropped, and those
+   whose colour replaces the table's (an opaque object: glass shows the table through itself,
+   :func:`table_colour_departure`); each kept instance grown to its colour outline
+   (:func:`grow_to_outline`), as a real glass's depth evidence covers only part of it.
 """
 
 from __future__ import annotations
@@ -54,6 +58,15 @@ BORDER_REACH = 0.1  # share of the image width along its sides where holes may b
 # 0.5 m for a D415 at 1280 px); see evidence_maps
 ENCLOSED_SHARE = 0.8  # share of a gap's surroundings the region must hold to fill it (_enclosed)
 EDGE_REACH, EDGE_SHARE, EDGE_THIN = 8, 0.8, 4.0  # an opaque object's edge band (opaque_edges)
+MIN_IMAGE_SHARE = 0.0014  # least share of the image an instance covers (600 px at 848x480): the
+# clusters of dropouts a real stereo camera scatters over a plain table are smaller
+OPAQUE_COLOUR = 3.5  # median colour departure from the table around it (table_colour_departure)
+# above which an instance is an opaque object: glass shows the table through itself
+COLOUR_WINDOW = 31  # pixels: the neighbourhood the table's local colour is taken from
+OUTLINE_COLOUR = 2.5  # colour departure that marks a glass's outline, rim or highlight
+OUTLINE_REACH = 25  # pixels around an instance searched for its outline (grow_to_outline)
+MAX_IMAGE_SHARE = 0.4  # most share of the image one instance covers: a region that large is the
+# table or the room failing as a whole, not an object standing on it
 
 
 @dataclass
@@ -144,6 +157,66 @@ def table_footprint(on_table: np.ndarray) -> np.ndarray:
     return out > 0
 
 
+def on_table_readings(depth_m: np.ndarray, K: np.ndarray, plane: Plane
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Heights above the table ``(H, W) float`` metres (0 where no reading) and the readings
+    that lie on it ``(H, W) bool`` (within the sensor's depth-squared noise)."""
+    valid = depth_m > 0
+    height = np.where(valid, plane.height(depth_to_points(depth_m, K)), 0.0)
+    on_table = valid & (np.abs(height) < 0.004 * np.maximum(depth_m, 0.3) ** 2 + 0.002)
+    return height, on_table
+
+
+def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray,
+                           window: int = COLOUR_WINDOW) -> np.ndarray:
+    """How far each pixel's colour departs from the table's colour around it ``(H, W) float``,
+    in units of the table's own spread (the 90th percentile of table pixels' departure), NaN
+    where no table reading lies within ``window`` pixels.
+
+    The table's local colour is the mean CIELAB colour of the pixels whose readings lie on the
+    table, within the window. A transparent object shows the table through itself, so over
+    most of its mask it departs little (edges and highlights aside); an opaque object's own
+    colour replaces the table's.
+    """
+    lab = cv2.cvtColor(cv2.GaussianBlur(rgb, (3, 3), 0), cv2.COLOR_RGB2LAB).astype(np.float32)
+    weight = on_table.astype(np.float32)
+    share = cv2.blur(weight, (window, window))
+    local = cv2.blur(lab * weight[..., None], (window, window)) / np.maximum(share, 1e-6)[..., None]
+    departure = np.linalg.norm(lab - local, axis=2)
+    spread = np.percentile(departure[on_table], 90) if on_table.any() else 1.0
+    out = departure / max(float(spread), 1e-3)
+    out[share <= 0.05] = np.nan
+    return out
+
+
+def looks_opaque(mask: np.ndarray, departure: np.ndarray) -> bool:
+    """Whether an instance ``(H, W) bool`` is an opaque object by its colour: the median
+    :func:`table_colour_departure` over its pixels with a table nearby is above
+    :data:`OPAQUE_COLOUR`."""
+    known = departure[mask]
+    known = known[np.isfinite(known)]
+    return known.size > 0 and float(np.median(known)) > OPAQUE_COLOUR
+
+
+def grow_to_outline(mask: np.ndarray, departure: np.ndarray, *, close_radius: int,
+                    reach: int = OUTLINE_REACH, level: float = OUTLINE_COLOUR) -> np.ndarray:
+    """An instance ``(H, W) bool`` grown to the colour outline around it.
+
+    The depth evidence of a real glass often covers only where the sensor failed (its rim, a
+    band of holes); the rest of the object reads the table through itself. Its outline, rim
+    and highlights still depart from the table's colour (:func:`table_colour_departure` above
+    ``level``): the pixels within ``reach`` of the instance that do are added, the result closed
+    and filled, and only the parts joined to the instance kept.
+    """
+    near = cv2.dilate(mask.astype(np.uint8), _disk(reach)) > 0
+    grown = mask | (near & (np.nan_to_num(departure, nan=0.0) > level))
+    grown = cv2.morphologyEx(grown.astype(np.uint8), cv2.MORPH_CLOSE, _disk(close_radius)) > 0
+    grown = ndimage.binary_fill_holes(grown)
+    count, labels = cv2.connectedComponents(grown.astype(np.uint8), connectivity=8)
+    keep = np.unique(labels[mask & grown])
+    return np.isin(labels, keep[keep > 0])
+
+
 def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_factor: float,
                   max_object_share: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Glass evidence, opaque evidence and the table's footprint, all ``(H, W) bool``.
@@ -153,9 +226,8 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     clearly above the table. Footprint: :func:`table_footprint`.
     """
     valid = depth_m > 0
-    height = np.where(valid, plane.height(depth_to_points(depth_m, K)), 0.0)
+    height, on_table = on_table_readings(depth_m, K, plane)
     rough = roughness(depth_m)
-    on_table = valid & (np.abs(height) < 0.004 * np.maximum(depth_m, 0.3) ** 2 + 0.002)
     footprint = table_footprint(on_table)
     holes = ~valid & (plane.depth_image(depth_m.shape, K) > 0)
     artefact = _border_artefacts(holes, max_object_share)
@@ -290,13 +362,32 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     pieces = [p for p in pieces if (p & footprint).sum() >= ON_TABLE_SHARE * p.sum()]
     if grabcut_iterations > 0:
         pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
+    departure = table_colour_departure(rgb, on_table_readings(depth_m, K, plane)[1])
     out = []
+    size = depth_m.size
+    least = max(min_area, int(MIN_IMAGE_SHARE * size))
+    pieces = [p for p in pieces if p.sum() <= MAX_IMAGE_SHARE * size]
     for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
         for mask in split_touching(region, K, plane, depth=depth_m, glass=glass,
                                    close_radius=close_radius, min_area=min_area):
-            if mask.sum() >= min_area:
-                out.append(Candidate(mask, float(glass[mask].mean())))
+            if least <= mask.sum() <= MAX_IMAGE_SHARE * size and \
+                    not looks_opaque(mask, departure):
+                score = float(glass[mask].mean())
+                out.append(Candidate(grow_to_outline(mask, departure, close_radius=5), score))
+    out = _without_overlaps(out)
     return sorted(out, key=lambda c: -int(c.mask.sum()))
+
+
+def _without_overlaps(found: list[Candidate]) -> list[Candidate]:
+    """Candidates sorted by area (largest first), the pixels two of them claim (after
+    :func:`grow_to_outline`) left to the larger."""
+    taken = None
+    out = []
+    for c in sorted(found, key=lambda c: -int(c.mask.sum())):
+        mask = c.mask if taken is None else c.mask & ~taken
+        taken = mask.copy() if taken is None else taken | mask
+        out.append(Candidate(mask, c.score))
+    return out
 
 
 def _pieces(mask: np.ndarray, max_pieces: int) -> tuple[np.ndarray, int, np.ndarray]:
