@@ -16,6 +16,7 @@ Recognised by content (the file name does not matter):
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 from typing import Any
@@ -33,14 +34,22 @@ def _K(fx, fy, cx, cy) -> np.ndarray:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], dtype=np.float64)
 
 
-def _from_mapping(data: dict[str, Any], path: Path, depth_scale: float) -> Camera:
+def _from_mapping(data: dict[str, Any], path: Path, depth_scale: float,
+                  notes: list[str] | None = None) -> Camera:
     def num(key, src=data):
         value = src[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(path, f"'{key}' must be a number, got {value!r}")
         return float(value)
 
-    scale = float(data.get("depth_scale", depth_scale))
+    scale = data.get("depth_scale", depth_scale)
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or \
+            not math.isfinite(scale) or scale <= 0:
+        raise InputError(path, f"'depth_scale' must be a positive number, got {scale!r}")
+    scale = float(scale)
+    if "depth_scale" not in data and notes is not None and "xres" not in data:
+        notes.append(f"{path}: no depth_scale; assuming io.depth_scale = {depth_scale:g} "
+                     "m per depth unit")
     if "K" in data and isinstance(data["K"], list) and len(data["K"]) == 3:  # native
         K = np.asarray(data["K"], dtype=np.float64)
         return Camera(K, int(data["width"]), int(data["height"]), scale, str(path))
@@ -87,8 +96,10 @@ def _matrix_only(K: np.ndarray, path: Path, depth_scale: float) -> Camera:
         raise InputError(path, str(exc)) from None
 
 
-def load_camera(path: str | Path, depth_scale: float = 0.001) -> Camera:
-    """Read any supported intrinsics file. ``depth_scale`` is used when the file has none.
+def load_camera(path: str | Path, depth_scale: float = 0.001,
+                notes: list[str] | None = None) -> Camera:
+    """Read any supported intrinsics file. ``depth_scale`` is used when the file has none (a
+    notice naming the file and the scale assumed is appended to ``notes``).
 
     A bare 3x3 matrix gives a camera with ``width == height == 0``: call
     :func:`fit_camera_to_image` with the image size.
@@ -98,6 +109,9 @@ def load_camera(path: str | Path, depth_scale: float = 0.001) -> Camera:
         raise InputError(path, "camera file does not exist")
     suffix = path.suffix.lower()
     try:
+        if suffix in (".npy", ".txt") and notes is not None:
+            notes.append(f"{path}: a bare matrix has no depth_scale; assuming io.depth_scale = "
+                         f"{depth_scale:g} m per depth unit")
         if suffix == ".npy":
             return _matrix_only(np.load(path, allow_pickle=False).astype(np.float64), path,
                                 depth_scale)
@@ -114,7 +128,7 @@ def load_camera(path: str | Path, depth_scale: float = 0.001) -> Camera:
     if not isinstance(data, dict):
         raise InputError(path, "camera file must hold a mapping")
     try:
-        cam = _from_mapping(data, path, depth_scale)
+        cam = _from_mapping(data, path, depth_scale, notes)
     except InputError:
         raise
     except KeyError as exc:
