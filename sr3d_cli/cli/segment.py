@@ -24,7 +24,7 @@ from sr3d_cli.errors import InputError
 def segment(scene, backend, prompt, import_dir, boxes, batch, out, frames, fmt):
     """Write masks/<frame>.png (instance ids) and masks/<frame>.json (label, score, bbox)."""
     from sr3d_cli.segment import Segmenter
-    from sr3d_cli.stages import write_instances
+    from sr3d_cli.stages import stage_record, stale, write_instances
 
     if import_dir and backend is None:
         backend = "import"
@@ -38,9 +38,11 @@ def segment(scene, backend, prompt, import_dir, boxes, batch, out, frames, fmt):
 
     def work(frame):
         instances = segmenter(frame.frame_id, frame.rgb, frame.depth_m, frame.camera.K)
-        write_instances(frame.scene, frame.frame_id, instances, cfg.segment.backend)
+        write_instances(frame.scene, frame.frame_id, instances, cfg.segment.backend,
+                        stage_record(cfg, frame.scene, frame.frame_id, "segment"))
         return [] if instances.objects else ["no transparent object found"]
 
     run_frames("segment", scene, cfg, out, frames, work, batch=batch,
                outputs=lambda source, fid: [source.output_path("masks", fid),
-                                            source.output_path("masks", fid, ".json")])
+                                            source.output_path("masks", fid, ".json")],
+               stale=lambda source, fid: stale(cfg, source, fid, "segment"))
