@@ -223,10 +223,16 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str,
 
 
 def load_mesh(path) -> trimesh.Trimesh:
+    """A triangle mesh file (PLY, OBJ, STL...); :class:`InputError` naming it where it cannot be
+    read, has no triangles or holds non-finite vertices."""
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:
-        raise ValueError(f"cannot read mesh {path} ({exc})") from None
+        raise InputError(path, f"cannot read mesh ({type(exc).__name__}: {exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise InputError(path, "mesh has no triangles (truncated or not a mesh)")
+    if not np.isfinite(mesh.vertices).all():
+        raise InputError(path, "mesh has non-finite vertices (NaN or inf)")
     return mesh
 
 
@@ -289,9 +295,30 @@ def load_pose_document(source: SceneSource, frame_id: str) -> dict:
         raise InputError(source.out / "poses" / f"{frame_id}.json",
                          "no poses: run `sr3d align` first")
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        document = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise InputError(path, f"cannot read poses ({exc})") from None
+    if not isinstance(document, dict) or not isinstance(document.get("objects", []), list):
+        raise InputError(path, "poses file must hold a mapping with an 'objects' list")
+    for obj in document.get("objects", []):
+        check_placement(obj, path)
+    return document
+
+
+def check_placement(obj, path) -> None:
+    """Raise :class:`InputError` naming ``path`` where a placed object (``id``, ``T_cam_obj``
+    4x4, ``scale`` > 0) has a missing, malformed or non-finite value."""
+    try:
+        k = int(obj["id"])
+        T = np.asarray(obj["T_cam_obj"], dtype=np.float64)
+        scale = float(obj["scale"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(path, f"object without a valid id, T_cam_obj and scale ({exc})") \
+            from None
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        raise InputError(path, f"object {k}: T_cam_obj must be a finite 4x4")
+    if not (np.isfinite(scale) and scale > 0):
+        raise InputError(path, f"object {k}: scale must be a finite number > 0, got {scale}")
 
 
 def load_poses(source: SceneSource, frame_id: str) -> list[dict]:
@@ -431,6 +458,7 @@ def grasp_truth(source: SceneSource, frame_id: str, plane_cfg):
     plane = support_plane(depth, camera.K, plane_cfg, exclude=None if ids is None else ids > 0)
     objects = []
     for obj in gt["objects"]:
+        check_placement(obj, source.gt_objects_path(frame_id))
         mesh = load_mesh(source.root / obj["mesh"])
         verts = place_points(mesh.vertices, np.asarray(obj["T_cam_obj"]), float(obj["scale"]))
         objects.append((int(obj["id"]), trimesh.Trimesh(verts, mesh.faces, process=False)))

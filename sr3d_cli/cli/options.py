@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import warnings
 
 import click
 
@@ -32,6 +33,8 @@ def setup_logging(verbose: int, quiet: bool) -> None:
     log.handlers[:] = [handler]
     log.setLevel(level)
     log.propagate = False
+    if not verbose:  # numerical warnings of the core are for -v
+        warnings.simplefilter("ignore")
 
 
 def common_options(func):

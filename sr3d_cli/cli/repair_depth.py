@@ -29,14 +29,16 @@ def repair_depth(scene, npy, ply, preview, masks, redo, batch, out, frames, fmt)
 
     A stage output is stale when the config keys it depends on or its upstream files changed
     since it was made; --keep-stale keeps such outputs (with a warning), --redo STAGE makes
-    that stage and the later ones again."""
+    that stage and the later ones again. A frame with objects of which none could be placed
+    fails (exit 1); its repaired depth is then the raw one."""
     from sr3d_cli.io import preview as previews
     from sr3d_cli.io.atomic import write_bytes, write_npy, write_png
     from sr3d_cli.io.images import write_depth
     from sr3d_cli.pipeline import Pipeline
     from sr3d_cli.io.atomic import write_json
     from sr3d_cli.io.provenance import RECORD_KEY
-    from sr3d_cli.stages import depth_suffix, stage_record
+    from sr3d_cli.errors import FrameFailed
+    from sr3d_cli.stages import depth_suffix, load_poses, stage_record
 
     cfg = load_config({"io.format": fmt, "reconstruct.masks": masks})
     check_masks(cfg)
@@ -67,7 +69,13 @@ def repair_depth(scene, npy, ply, preview, masks, redo, batch, out, frames, fmt)
         if preview:
             write_png(source.output_path("repaired", fid, "_preview.png"),
                       previews.preview_image(frame.rgb, frame.depth_m, depth, ids))
-        write_json(source.output_path("repaired", fid, ".json"), {RECORD_KEY: record})
+        placed = len(load_poses(source, fid))
+        document = {RECORD_KEY: record, "placed": placed}
+        if placed == 0 and (ids > 0).any():  # objects, none placed: the raw depth, unrepaired
+            document["frame_failed"] = "no object placed (" + "; ".join(messages) + ")"
+        write_json(source.output_path("repaired", fid, ".json"), document)
+        if "frame_failed" in document:
+            raise FrameFailed(document["frame_failed"])
         return messages
 
     def outputs(source, fid):

@@ -180,9 +180,12 @@ class SceneSource:
         if path is None:
             return None
         try:
-            return json.loads(path.read_text(encoding="utf-8"))
+            document = json.loads(path.read_text(encoding="utf-8"))
         except (ValueError, OSError) as exc:
             raise InputError(path, f"cannot read JSON ({exc})") from None
+        if not isinstance(document, dict) or not isinstance(document.get("objects", []), list):
+            raise InputError(path, "expected a mapping with an 'objects' list")
+        return document
 
     # ---- predictions (evaluate) -------------------------------------------------------------
     def stage_file(self, stage: str, frame_id: str, suffixes) -> Path | None:
