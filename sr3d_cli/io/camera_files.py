@@ -42,6 +42,13 @@ def _from_mapping(data: dict[str, Any], path: Path, depth_scale: float,
             raise InputError(path, f"'{key}' must be a number, got {value!r}")
         return float(value)
 
+    def size(key):
+        value = data[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                not math.isfinite(value) or value < 0 or value != int(value):
+            raise InputError(path, f"'{key}' must be a whole number of pixels, got {value!r}")
+        return int(value)
+
     scale = data.get("depth_scale", depth_scale)
     if isinstance(scale, bool) or not isinstance(scale, (int, float)) or \
             not math.isfinite(scale) or scale <= 0:
@@ -52,23 +59,23 @@ def _from_mapping(data: dict[str, Any], path: Path, depth_scale: float,
                      "m per depth unit")
     if "K" in data and isinstance(data["K"], list) and len(data["K"]) == 3:  # native
         K = np.asarray(data["K"], dtype=np.float64)
-        return Camera(K, int(data["width"]), int(data["height"]), scale, str(path))
+        return Camera(K, size("width"), size("height"), scale, str(path))
     if "intrinsic_matrix" in data:  # Open3D, column-major
         K = np.asarray(data["intrinsic_matrix"], dtype=np.float64).reshape(3, 3).T
-        return Camera(K, int(data["width"]), int(data["height"]), scale, str(path))
+        return Camera(K, size("width"), size("height"), scale, str(path))
     if "ppx" in data:  # RealSense rs2_intrinsics
         K = _K(num("fx"), num("fy"), num("ppx"), num("ppy"))
-        return Camera(K, int(data["width"]), int(data["height"]), scale, str(path))
+        return Camera(K, size("width"), size("height"), scale, str(path))
     if "camera_matrix" in data:  # ROS camera_calibration YAML
         K = np.asarray(data["camera_matrix"]["data"], dtype=np.float64).reshape(3, 3)
-        return Camera(K, int(data["image_width"]), int(data["image_height"]), scale, str(path))
+        return Camera(K, size("image_width"), size("image_height"), scale, str(path))
     for key in ("K", "k"):  # ROS CameraInfo message (flat 9 numbers)
         if key in data and "width" in data:
             K = np.asarray(data[key], dtype=np.float64).reshape(3, 3)
-            return Camera(K, int(data["width"]), int(data["height"]), scale, str(path))
+            return Camera(K, size("width"), size("height"), scale, str(path))
     if "xres" in data:  # ClearGrasp
         K = _K(num("fx"), num("fy"), num("cx"), num("cy"))
-        return Camera(K, int(data["xres"]), int(data["yres"]), scale, str(path))
+        return Camera(K, size("xres"), size("yres"), scale, str(path))
     raise InputError(path, "unrecognised camera file: expected native, Open3D, RealSense, ROS "
                            "CameraInfo or ClearGrasp intrinsics")
 
@@ -133,7 +140,7 @@ def load_camera(path: str | Path, depth_scale: float = 0.001,
         raise
     except KeyError as exc:
         raise InputError(path, f"camera file lacks {exc}") from None
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise InputError(path, f"incomplete camera file ({type(exc).__name__}: {exc})") from None
     if "xres" in data:
         precise = _cleargrasp_parameters(path)
