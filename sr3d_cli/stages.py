@@ -185,7 +185,8 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str,
                       record: dict | None = None) -> tuple[int, list[str]]:
     """Reconstruct every instance of a frame; returns (meshes written, object messages).
     Writes ``meshes/<frame>.json`` (the meshes written, with their fingerprints, the object
-    messages and ``record``) and removes meshes of an earlier run no instance has now."""
+    messages, ``frame_failed`` where there are instances and no mesh, and ``record``) and removes
+    meshes of an earlier run no instance has now."""
     source, fid = frame.scene, frame.frame_id
     ids, records = load_instances(source, fid, frame.depth_m.shape, which_masks)
     plane, why = frame_plane(frame, ids, plane_cfg)
@@ -216,6 +217,8 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str,
             if path.stem.split("_")[0] not in made and path.stem.split("_")[0].isdigit():
                 path.unlink()
     document = {"objects": made, "failed": messages}
+    if records and not made:
+        document["frame_failed"] = "no mesh made (" + "; ".join(messages) + ")"
     if record is not None:
         document[provenance.RECORD_KEY] = record
     write_json(source.output_path("meshes", fid, ".json"), document)
@@ -257,7 +260,8 @@ def _pose_hint(path) -> tuple[np.ndarray, float] | None:
 
 def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
                 bop: bool = False, record: dict | None = None) -> tuple[list[dict], list[str]]:
-    """Place every reconstructed object; writes ``poses/<id>.json``. Returns (objects, messages)."""
+    """Place every reconstructed object; writes ``poses/<id>.json`` (``frame_failed`` where
+    there are instances and none was placed). Returns (objects, messages)."""
     source, fid = frame.scene, frame.frame_id
     ids, records = load_instances(source, fid, frame.depth_m.shape, which_masks)
     plane, why = frame_plane(frame, ids, plane_cfg)
@@ -282,6 +286,8 @@ def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
                         "diagnostics": placement.diagnostics})
     document = {"objects": objects, "failed": messages,
                 "plane": plane.to_json() if plane is not None else None}
+    if records and not objects:
+        document["frame_failed"] = "no object placed (" + "; ".join(messages) + ")"
     if record is not None:
         document[provenance.RECORD_KEY] = record
     write_json(source.output_path("poses", fid, ".json"), document)
@@ -431,8 +437,11 @@ def load_grasps(source: SceneSource, frame_id: str):
         raise InputError(source.out / "grasps" / f"{frame_id}.npy",
                          "no grasps: run `sr3d grasp` first")
     try:
-        return GraspSet.from_array(np.load(path, allow_pickle=False))
-    except (OSError, ValueError) as exc:
+        array = np.load(path, allow_pickle=False)
+        if not np.isfinite(array).all():
+            raise ValueError("non-finite numbers (NaN or inf)")
+        return GraspSet.from_array(array)
+    except (OSError, ValueError, TypeError, EOFError) as exc:
         raise InputError(path, f"cannot read grasps ({exc})") from None
 
 

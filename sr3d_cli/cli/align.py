@@ -22,6 +22,7 @@ from sr3d_cli.cli.stage_loop import batch_options, run_frames
 def align(scene, mode, masks, bop, batch, out, frames, fmt):
     """Write poses/<frame>.json: T_cam_obj, scale, view and silhouette scores, diagnostics."""
     from sr3d_cli.align import Aligner
+    from sr3d_cli.errors import FrameFailed
     from sr3d_cli.io.atomic import write_json
     from sr3d_cli.io.formats.bop import bop_scene_gt
     from sr3d_cli.stages import align_frame, load_poses, stage_record, stale
@@ -31,8 +32,11 @@ def align(scene, mode, masks, bop, batch, out, frames, fmt):
     aligner = Aligner(cfg.align)
 
     def work(frame):
-        _, messages = align_frame(frame, aligner, cfg.plane, cfg.reconstruct.masks,
-                                  record=stage_record(cfg, frame.scene, frame.frame_id, "align"))
+        objects, messages = align_frame(
+            frame, aligner, cfg.plane, cfg.reconstruct.masks,
+            record=stage_record(cfg, frame.scene, frame.frame_id, "align"))
+        if not objects and messages:  # instances, and none placed
+            raise FrameFailed("no object placed (" + "; ".join(messages) + ")")
         return messages
 
     def write_bop(scenes):

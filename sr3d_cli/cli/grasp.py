@@ -30,6 +30,7 @@ def grasp(scene, only, depth_source, masks, hand_poses, preview, batch, out, fra
     its grasps file says why."""
     from sr3d_cli.errors import FrameFailed
     from sr3d_cli.grasp.planner import Planner
+    from sr3d_cli.pipeline import Pipeline
     from sr3d_cli.io.atomic import write_png
     from sr3d_cli.io.preview import grasp_preview
     from sr3d_cli.stages import grasp_frame, load_grasps, stage_record, stale
@@ -38,6 +39,7 @@ def grasp(scene, only, depth_source, masks, hand_poses, preview, batch, out, fra
                        "reconstruct.masks": masks})
     check_masks(cfg)
     planner = Planner(cfg.grasp)
+    pipeline = Pipeline(cfg)  # only to tell whether the stage outputs planned on are current
 
     def work(frame):
         n, messages, failure = grasp_frame(
@@ -46,6 +48,11 @@ def grasp(scene, only, depth_source, masks, hand_poses, preview, batch, out, fra
             stage_record(cfg, frame.scene, frame.frame_id, "grasp"))
         if failure is not None:
             raise FrameFailed(failure)
+        if cfg.grasp.source == "repaired":
+            why = pipeline.stale_chain(frame.scene, frame.frame_id)
+            if why is not None:
+                messages = messages + [f"planned on stale outputs ({why}): run "
+                                       "`sr3d repair-depth` to make them again"]
         if preview:
             write_png(frame.scene.output_path("grasps", frame.frame_id, "_preview.png"),
                       grasp_preview(frame.rgb, load_grasps(frame.scene, frame.frame_id),

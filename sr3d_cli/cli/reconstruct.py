@@ -7,7 +7,7 @@ import click
 from sr3d_cli.cli.options import (UsageExit, check_masks, common_options, load_config,
                                   masks_option, scene_options)
 from sr3d_cli.cli.stage_loop import batch_options, run_frames
-from sr3d_cli.errors import InputError
+from sr3d_cli.errors import FrameFailed, InputError
 
 
 @click.command()
@@ -36,9 +36,11 @@ def reconstruct(scene, backend, masks, library, batch, out, frames, fmt):
         raise UsageExit(str(exc)) from None
 
     def work(frame):
-        _, messages = reconstruct_frame(
+        written, messages = reconstruct_frame(
             frame, reconstructor, cfg.plane, cfg.reconstruct.masks,
             stage_record(cfg, frame.scene, frame.frame_id, "reconstruct"))
+        if written == 0 and messages:  # instances, and no mesh for any
+            raise FrameFailed("no mesh made (" + "; ".join(messages) + ")")
         return messages
 
     run_frames("reconstruct", scene, cfg, out, frames, work, batch=batch,

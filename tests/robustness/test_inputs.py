@@ -225,6 +225,27 @@ def test_a_damaged_mesh_fails_its_frame_naming_the_file(repaired_scene):
     assert snapshot(repaired_scene, "000000", "000002") == before
 
 
+def test_a_mesh_with_nan_vertices_fails_its_frame_naming_the_file(repaired_scene):
+    import trimesh
+
+    path = repaired_scene / "meshes" / "000001" / "1.ply"
+    mesh = trimesh.load(path, process=False)
+    mesh.vertices[0] = np.nan
+    path.write_bytes(mesh.export(file_type="ply"))
+    result = run("grasp", repaired_scene, "--masks", "gt", "--frames", "000001", "-q")
+    assert_clean(result, 1, "meshes/000001/1.ply", "non-finite vertices")
+
+
+def test_grasps_with_nan_are_refused_naming_the_file(repaired_scene):
+    from sr3d_cli.io.atomic import write_npy
+
+    (repaired_scene / "gt" / "objects").mkdir(parents=True)
+    (repaired_scene / "gt" / "objects" / "000000.json").write_text('{"objects": []}')
+    write_npy(repaired_scene / "grasps" / "000000.npy", np.full((2, 17), np.nan))
+    result = run("evaluate", repaired_scene, "--grasps", "--frames", "000000", "-q")
+    assert_clean(result, 1, "grasps/000000.npy", "non-finite")
+
+
 @pytest.mark.parametrize("content, problem", [
     ("{not json", "cannot read poses"),
     ('{"objects": [{"id": 1, "T_cam_obj": [[NaN, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0.5], '

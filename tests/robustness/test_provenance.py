@@ -172,3 +172,27 @@ def test_ctrl_c_with_workers_exits_130_cleanly(small_scenes, tmp_path):
     assert partial and not any(".tmp" in name for name in partial)
     reference = _outputs(clean)
     assert all(data == reference[name] for name, data in partial.items())
+
+
+def test_grasp_warns_when_it_plans_on_stale_outputs(repaired):
+    result = run("grasp", repaired, "--set", "align.refine_evals=40")
+    assert result.exit_code == 0, result.output
+    assert "planned on stale outputs (align: align.refine_evals was 80, now 40)" in result.output
+    result = run("grasp", repaired)
+    assert result.exit_code == 0 and "stale" not in result.output
+
+
+def test_align_and_reconstruct_fail_a_frame_where_no_object_is_made(tmp_path):
+    from tests.conftest import make_native_scene
+
+    scene = make_native_scene(tmp_path / "scene", 1)  # a 48-pixel object: below min_pixels
+    result = run("reconstruct", scene, "--masks", "gt", "-q")
+    assert result.exit_code == 1 and "failed: 000000: no mesh made (object 1: mask has 48 px" \
+        in result.output
+    assert "frame_failed" in json.loads((scene / "meshes" / f"{FRAME}.json").read_text())
+    result = run("align", scene, "--masks", "gt", "-q")
+    assert result.exit_code == 1 and "no object placed" in result.output
+    # a failed frame is not done for --skip-existing; made with a smaller minimum it is
+    result = run("reconstruct", scene, "--masks", "gt", "--skip-existing", "-q",
+                 "--set", "reconstruct.min_pixels=10")
+    assert result.exit_code == 0 and (scene / "meshes" / FRAME / "1.ply").is_file()
