@@ -130,7 +130,7 @@ def load_camera(path: str | Path, depth_scale: float = 0.001,
         data = json.loads(text) if suffix == ".json" else yaml.safe_load(text)
     except InputError:
         raise
-    except (ValueError, OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+    except (ValueError, OSError, EOFError, TypeError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise InputError(path, f"cannot parse camera file ({exc})") from None
     if not isinstance(data, dict):
         raise InputError(path, "camera file must hold a mapping")

@@ -8,8 +8,10 @@ judged and counts as current.
 
 Stages and what they depend on (DESIGN.md, "Scene folder"):
 
+- every stage also records ``io.depth_scale``
 - segment: rgb, depth, camera; ``segment.*``, ``plane.*``
-- reconstruct: rgb, depth, camera, the instance masks; ``reconstruct.*`` (but ``masks``), ``plane.*``
+- reconstruct: rgb, depth, camera, the instance masks; ``reconstruct.*`` (but ``masks``),
+  ``plane.*``
 - align: depth, camera, masks, the frame's meshes; ``align.*``, ``plane.*``
 - repair: depth, camera, masks, poses, meshes; ``repair.*``, ``render.*``, ``plane.*``
 - grasp: depth, camera, masks, repaired depth, poses, meshes; ``grasp.*``, ``plane.*``
