@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -44,8 +45,6 @@ def write_instances(source: SceneSource, frame_id: str, instances, backend: str,
 def folder_mask_path(folder, frame_id: str):
     """The mask of a frame in a folder of masks made elsewhere: ``<frame>.png``, or ClearGrasp's
     ``<frame>-mask.png``, or TransCG's ``<frame>/depth1-gt-mask.png`` (None: none there)."""
-    from pathlib import Path
-
     folder = Path(folder)
     for name in (f"{frame_id}.png", f"{frame_id}-mask.png", f"{frame_id}/depth1-gt-mask.png"):
         if (folder / name).is_file():
@@ -161,6 +160,11 @@ def stage_inputs(source: SceneSource, frame_id: str, stage: str, which_masks: st
 def stage_record(cfg, source: SceneSource, frame_id: str, stage: str) -> dict:
     """The ``made_from`` record a stage output of this frame made now would carry."""
     inputs = stage_inputs(source, frame_id, stage, cfg.reconstruct.masks, cfg.grasp.source)
+    if stage == "segment" and cfg.segment.backend == "import" and cfg.segment.import_dir:
+        folder = Path(cfg.segment.import_dir)  # the imported mask, whatever its image suffix
+        inputs["imported"] = next((folder / f"{frame_id}{suffix}" for suffix in
+                                   (".png", ".tif", ".tiff", ".bmp")
+                                   if (folder / f"{frame_id}{suffix}").is_file()), None)
     record = provenance.made_from(cfg, stage, inputs)
     record["config"]["io.depth_scale"] = float(cfg.io.depth_scale)
     return record

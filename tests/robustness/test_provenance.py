@@ -13,6 +13,8 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -196,3 +198,25 @@ def test_align_and_reconstruct_fail_a_frame_where_no_object_is_made(tmp_path):
     result = run("reconstruct", scene, "--masks", "gt", "--skip-existing", "-q",
                  "--set", "reconstruct.min_pixels=10")
     assert result.exit_code == 0 and (scene / "meshes" / FRAME / "1.ply").is_file()
+
+
+def test_a_changed_imported_mask_makes_the_masks_again(tmp_path):
+    from sr3d_cli.io.atomic import write_png
+    from tests.conftest import make_native_scene
+
+    scene = make_native_scene(tmp_path / "scene", 1)
+    imported = tmp_path / "imported"
+    mask = np.zeros((24, 32), np.uint8)
+    mask[8:14, 10:18] = 1
+    write_png(imported / f"{FRAME}.png", mask)
+    args = ("segment", scene, "--import-dir", imported, "--set", "segment.min_area=10",
+            "--skip-existing", "-q")
+    assert run(*args).exit_code == 0
+    assert run(*args).exit_code == 0 and recorded(scene, "segment")["inputs"]["imported"]
+    before = (scene / RECORDS["segment"]).stat().st_mtime_ns
+    mask[8:14, 10:12] = 0  # the imported mask changes: the masks are stale
+    write_png(imported / f"{FRAME}.png", mask)
+    assert run(*args).exit_code == 0
+    assert (scene / RECORDS["segment"]).stat().st_mtime_ns != before
+    ids = cv2.imread(str(scene / "masks" / f"{FRAME}.png"), cv2.IMREAD_UNCHANGED)
+    assert (ids > 0).sum() == 6 * 6
