@@ -161,7 +161,7 @@ def test_ctrl_c_with_workers_exits_130_cleanly(small_scenes, tmp_path):
     clean, stopped = tmp_path / "clean", tmp_path / "stopped"
     cmd = [sys.executable, "-m", "sr3d_cli", "segment", str(src), "--workers", "2", "--out"]
     subprocess.run(cmd + [str(clean), "-q"], check=True, timeout=300)
-    proc = subprocess.Popen(cmd + [str(stopped)], start_new_session=True, text=True,
+    proc = subprocess.Popen(cmd + [str(stopped)], process_group=0, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
     deadline = time.time() + 120
     while time.time() < deadline and not list(stopped.rglob("masks/*.json")):
