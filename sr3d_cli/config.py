@@ -9,6 +9,7 @@ command-line flags. Unknown sections or keys and values of the wrong type raise
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -210,13 +211,65 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "render.backend": ("auto", "pyrender", "numpy"),
     "segment.backend": ("training-free", "sam-onnx", "import"),
     "reconstruct.backend": ("revolution", "onnx", "library"),
-    "reconstruct.masks": ("segment", "gt"),
     "align.mode": ("sr3d", "paper"),
     "repair.outside_render": ("nearest", "keep", "plane"),
     "grasp.source": ("repaired", "raw"),
     "evaluate.holes": ("full", "ignore"),
     "evaluate.mask": ("auto", "gt", "pred"),
 }
+
+
+# Value ranges: (low, high, low inclusive). Numbers not listed must be finite and >= 0; every
+# number in a list is checked like the key itself.
+POSITIVE = (0.0, math.inf, False)
+SHARE = (0.0, 1.0, True)
+RANGES: dict[str, tuple[float, float, bool]] = {
+    **{key: POSITIVE for key in (
+        "io.depth_scale", "io.max_median_depth", "plane.threshold", "plane.iterations",
+        "reconstruct.levels", "reconstruct.iterations", "reconstruct.sections",
+        "reconstruct.onnx_resolution", "reconstruct.onnx_radius", "align.views", "align.rolls",
+        "align.yaw_steps", "align.max_rests", "align.patches", "align.contact_points",
+        "align.top_candidates", "align.depth_samples", "align.window", "grasp.max_width",
+        "grasp.finger_length", "grasp.finger_thickness", "grasp.finger_height",
+        "grasp.palm_width", "grasp.palm_height", "grasp.palm_depth", "grasp.base_to_tip",
+        "grasp.depths", "grasp.friction", "grasp.seeds", "grasp.approaches",
+        "grasp.pair_radius", "grasp.contact_band", "grasp.collision_points",
+        "grasp.mesh_points", "grasp.stride", "grasp.nms_distance", "grasp.top_k",
+        "synth.scenes", "synth.views", "synth.depth_scale", "synth.max_range",
+        "synth.distance", "evaluate.plot_max_error")},
+    **{key: SHARE for key in (
+        "plane.min_share", "segment.max_object_share", "segment.min_score",
+        "reconstruct.open_top_ratio",
+        "reconstruct.open_explains", "reconstruct.foreground_ratio", "align.depth_min_share",
+        "align.depth_agree", "synth.lying_fraction", "synth.hole_fraction",
+        "synth.see_through_fraction")},
+    "synth.elevation_deg": (0.0, 90.0, True),
+    "align.depth_max_change": (0.0, 1.0, True),
+    "align.depth_search": (0.0, 1.0, True),
+}
+MAX_INT = 2**31 - 1
+ORDERED_PAIRS = ("synth.objects", "synth.distractors", "synth.distance", "synth.elevation_deg",
+                 "synth.hole_fraction", "synth.see_through_fraction")
+
+
+def _check_range(value: Any, key: str, origin: str) -> None:
+    """Raise :class:`ConfigError` naming ``key`` where a number of ``value`` is out of range."""
+    where = f"'{key}' in {origin}"
+    numbers = value if isinstance(value, list) else [value]
+    if key in ORDERED_PAIRS and (len(numbers) != 2 or numbers[0] > numbers[1]):
+        raise ConfigError(f"{where}: expected [min, max] with min <= max, got {value!r}")
+    low, high, inclusive = RANGES.get(key, (0.0, math.inf, True))
+    for x in numbers:
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            continue
+        if not math.isfinite(x):
+            raise ConfigError(f"{where}: expected a finite number, got {x!r}")
+        if isinstance(x, int) and x > MAX_INT:
+            raise ConfigError(f"{where}: must be <= {MAX_INT}, got {x!r}")
+        if x < low or (x == low and not inclusive) or x > high:
+            lo = f"{'>=' if inclusive else '>'} {low:g}"
+            span = lo if high == math.inf else f"{lo} and <= {high:g}"
+            raise ConfigError(f"{where}: must be {span}, got {x!r}")
 
 
 def _coerce(value: Any, annotation: Any, key: str, origin: str) -> Any:
@@ -278,6 +331,15 @@ def apply_mapping(cfg: Config, data: Mapping[str, Any], origin: str) -> Config:
                 raise ConfigError(
                     f"'{full}' in {origin}: {value!r} is not one of {', '.join(CHOICES[full])}"
                 )
+            if full == "reconstruct.masks" and not value:
+                raise ConfigError(f"'{full}' in {origin}: expected segment, gt or a folder")
+            if full == "synth.resolutions":
+                for item in value:
+                    w, x, h = item.partition("x")
+                    if not (x and w.isdigit() and h.isdigit() and int(w) > 0 and int(h) > 0):
+                        raise ConfigError(f"'{full}' in {origin}: expected WIDTHxHEIGHT such "
+                                          f"as 640x480, got {item!r}")
+            _check_range(value, full, origin)
             updates[key] = value
         setattr(cfg, section, dataclasses.replace(current, **updates))
     return cfg
@@ -338,6 +400,9 @@ def build_config(
             continue
         section, _, name = full.partition(".")
         cfg = apply_mapping(cfg, {section: {name: value}}, "the command line")
+    if cfg.io.min_median_depth >= cfg.io.max_median_depth:
+        raise ConfigError(f"'io.min_median_depth' ({cfg.io.min_median_depth:g}) must be below "
+                          f"'io.max_median_depth' ({cfg.io.max_median_depth:g})")
     return cfg
 
 

@@ -33,6 +33,11 @@ class InputError(Sr3dError, ValueError):
         super().__init__(f"{self.path}: {problem}")
 
 
+class FrameFailed(Sr3dError):
+    """A frame ran but produced nothing it should have (a frame with objects and no grasp);
+    what it wrote says why. The frame counts as failed (exit code 1)."""
+
+
 class MissingExtraError(Sr3dError, ImportError):
     """An optional dependency is needed for the feature in use."""
 

@@ -1,16 +1,25 @@
-"""The whole chain for one frame: run whichever stage has no output yet, then repair the depth.
+"""The whole chain for one frame: run whichever stage has no current output, then repair the
+depth.
 
-Stage objects (segmenter, reconstructor, aligner, renderer) are made once per batch, lazily, so
-a run that finds every upstream output on disk loads no model.
+A stage output is current when what it records it was made from (config keys, upstream files:
+:mod:`sr3d_cli.io.provenance`) matches what it would be made from now; a stale one is made again
+(or, with ``keep_stale``, kept with a message), and so is every stage from ``redo`` on. Stage
+objects (segmenter, reconstructor, aligner, renderer) are made once per batch, lazily, so a run
+that finds every upstream output on disk and current loads no model.
 """
 
 from __future__ import annotations
+
+import logging
 
 import numpy as np
 
 from sr3d_cli.config import Config
 from sr3d_cli.io.scene import Frame
 from sr3d_cli import stages
+from sr3d_cli.io.provenance import STAGES
+
+log = logging.getLogger("sr3d")
 
 
 class Pipeline:
@@ -50,36 +59,67 @@ class Pipeline:
             self._renderer = make_renderer(self.cfg.render.backend)
         return self._renderer
 
-    def ensure_upstream(self, frame: Frame, timings: dict | None = None) -> list[str]:
-        """Segment, reconstruct and align where their outputs are missing."""
+    def upstream_stages(self) -> list[str]:
+        """The stages before repair this config runs: segment only where masks come from it."""
+        first = "segment" if self.cfg.reconstruct.masks == "segment" else "reconstruct"
+        return list(STAGES[STAGES.index(first):STAGES.index("repair")])
+
+    def why_run(self, source, frame_id: str, stage: str, redo: str | None = None
+                ) -> str | None:
+        """Why ``stage`` must run for this frame: ``--redo``, its output missing or stale
+        (None: current)."""
+        if redo is not None and STAGES.index(stage) >= STAGES.index(redo):
+            return f"--redo {redo}"
+        return stages.stale(self.cfg, source, frame_id, stage)
+
+    def stale_chain(self, source, frame_id: str, redo: str | None = None) -> str | None:
+        """The first stage up to repair that must run for this frame, with why (None: none)."""
+        for stage in self.upstream_stages() + ["repair"]:
+            why = self.why_run(source, frame_id, stage, redo)
+            if why is not None:
+                return f"{stage}: {why}"
+        return None
+
+    def ensure_upstream(self, frame: Frame, timings: dict | None = None,
+                        redo: str | None = None, keep_stale: bool = False) -> list[str]:
+        """Segment, reconstruct and align where their outputs are missing, stale, or from
+        ``redo`` on; with ``keep_stale`` a stale output is kept and a message says so."""
         import time
 
         source, fid = frame.scene, frame.frame_id
         messages: list[str] = []
         timings = {} if timings is None else timings
-        if source.stage_file("masks", fid, (".png",)) is None:
+        which = self.cfg.reconstruct.masks
+        for stage in self.upstream_stages():
+            why = self.why_run(source, fid, stage, redo)
+            if why is None:
+                continue
+            if keep_stale and why != "missing" and not why.startswith("--redo"):
+                messages.append(f"{stage} output kept though stale ({why}; --keep-stale)")
+                continue
+            if why != "missing":
+                log.info("%s: %s made again (%s)", frame.key, stage, why)
+            record = stages.stage_record(self.cfg, source, fid, stage)
             t = time.perf_counter()
-            inst = self.segmenter(fid, frame.rgb, frame.depth_m, frame.camera.K)
-            stages.write_instances(source, fid, inst, self.cfg.segment.backend)
-            timings["segment"] = time.perf_counter() - t
-        ids, records = stages.load_instances(source, fid, frame.depth_m.shape)
-        if any(not stages.mesh_path(source, fid, k).is_file() for k in records):
-            t = time.perf_counter()
-            _, msgs = stages.reconstruct_frame(frame, self.reconstructor, self.cfg.plane,
-                                               "segment")
-            messages += msgs
-            timings["reconstruct"] = time.perf_counter() - t
-        if source.stage_file("poses", fid, (".json",)) is None:
-            t = time.perf_counter()
-            _, msgs = stages.align_frame(frame, self.aligner, self.cfg.plane)
-            messages += [m for m in msgs if "no mesh" not in m]
-            timings["align"] = time.perf_counter() - t
+            if stage == "segment":
+                inst = self.segmenter(fid, frame.rgb, frame.depth_m, frame.camera.K)
+                stages.write_instances(source, fid, inst, self.cfg.segment.backend, record)
+            elif stage == "reconstruct":
+                _, msgs = stages.reconstruct_frame(frame, self.reconstructor, self.cfg.plane,
+                                                   which, record)
+                messages += msgs
+            else:
+                _, msgs = stages.align_frame(frame, self.aligner, self.cfg.plane, which,
+                                             record=record)
+                messages += [m for m in msgs if "no mesh" not in m]
+            timings[stage] = time.perf_counter() - t
         return messages
 
     def repaired_depth(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
         """(repaired depth (H, W) float32 metres, instance ids) from the stage outputs on disk."""
         source, fid = frame.scene, frame.frame_id
-        ids, _ = stages.load_instances(source, fid, frame.depth_m.shape)
+        ids, _ = stages.load_instances(source, fid, frame.depth_m.shape,
+                                       self.cfg.reconstruct.masks)
         placed = []
         for obj in stages.load_poses(source, fid):
             mesh = stages.load_mesh(stages.find_mesh(source, fid, obj["id"]))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -17,22 +18,67 @@ from sr3d_cli.errors import InputError
 from sr3d_cli.geometry.occlusion import occluders, opaque_objects
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points
+from sr3d_cli.io import provenance
 from sr3d_cli.io.atomic import write_bytes, write_json, write_npy, write_png
 from sr3d_cli.io.scene import Frame, SceneSource
 
 log = logging.getLogger("sr3d")
 
 
-def write_instances(source: SceneSource, frame_id: str, instances, backend: str) -> None:
+# the JSON of each stage output that holds its ``made_from`` record (DESIGN.md, "Scene folder")
+RECORD_FILES = {"segment": ("masks", ".json"), "reconstruct": ("meshes", ".json"),
+                "align": ("poses", ".json"), "repair": ("repaired", ".json"),
+                "grasp": ("grasps", ".json")}
+
+
+def write_instances(source: SceneSource, frame_id: str, instances, backend: str,
+                    record: dict | None = None) -> None:
     ids = instances.ids
     dtype = np.uint8 if ids.max(initial=0) <= 255 else np.uint16
+    document = instances.to_json(backend)
+    if record is not None:
+        document[provenance.RECORD_KEY] = record
     write_png(source.output_path("masks", frame_id), ids.astype(dtype))
-    write_json(source.output_path("masks", frame_id, ".json"), instances.to_json(backend))
+    write_json(source.output_path("masks", frame_id, ".json"), document)
+
+
+def folder_mask_path(folder, frame_id: str):
+    """The mask of a frame in a folder of masks made elsewhere: ``<frame>.png``, or ClearGrasp's
+    ``<frame>-mask.png``, or TransCG's ``<frame>/depth1-gt-mask.png`` (None: none there)."""
+    folder = Path(folder)
+    for name in (f"{frame_id}.png", f"{frame_id}-mask.png", f"{frame_id}/depth1-gt-mask.png"):
+        if (folder / name).is_file():
+            return folder / name
+    return None
+
+
+def masks_path(source: SceneSource, frame_id: str, which: str = "segment"):
+    """The instance mask file a stage reads: ``masks/`` (segment), the ground truth (gt) or a
+    folder of masks made elsewhere (None where there is none yet)."""
+    if which == "segment":
+        return source.stage_file("masks", frame_id, (".png",))
+    if which == "gt":
+        return source.gt_mask_path(frame_id)
+    return folder_mask_path(which, frame_id)
 
 
 def load_instances(source: SceneSource, frame_id: str, shape: tuple[int, int],
                    which: str = "segment") -> tuple[np.ndarray, dict[int, dict]]:
-    """Instance ids ``(H, W) int32`` and per-id records, from ``masks/`` or the ground truth."""
+    """Instance ids ``(H, W) int32`` and per-id records, from ``masks/`` (``which`` segment),
+    the ground truth (gt) or a folder of masks (``which`` is its path; a binary mask is split
+    into connected components)."""
+    if which not in ("gt", "segment"):
+        path = folder_mask_path(which, frame_id)
+        if path is None:
+            raise InputError(which, f"no mask for frame {frame_id} ({frame_id}.png or "
+                                    f"{frame_id}-mask.png)")
+        from sr3d_cli.io.images import read_mask
+
+        ids = read_mask(path, split_binary=True)
+        if ids.shape != tuple(shape):
+            raise InputError(path, f"mask is {ids.shape[1]}x{ids.shape[0]} but the images are "
+                                   f"{shape[1]}x{shape[0]}")
+        return ids, {int(k): {"id": int(k), "label": ""} for k in np.unique(ids) if k > 0}
     if which == "gt":
         path = source.gt_mask_path(frame_id)
         if path is None:
@@ -76,19 +122,6 @@ def mesh_path(source: SceneSource, frame_id: str, obj_id: int, suffix: str = ".p
     return source.out / "meshes" / frame_id / f"{obj_id}{suffix}"
 
 
-def mesh_outputs(source: SceneSource, frame_id: str) -> list:
-    """The mesh files reconstruct writes for a frame: one per instance in ``masks/`` (a
-    path that cannot exist when the frame has no masks yet)."""
-    path = source.stage_file("masks", frame_id, (".json",))
-    try:
-        objects = json.loads(path.read_text(encoding="utf-8"))["objects"] if path else None
-    except (OSError, ValueError, KeyError, TypeError):
-        objects = None
-    if objects is None:
-        return [source.out / "meshes" / frame_id / "<no masks>"]
-    return [mesh_path(source, frame_id, int(o["id"])) for o in objects]
-
-
 def find_mesh(source: SceneSource, frame_id: str, obj_id: int):
     """The mesh of an object: under the output root, else under the input root (else the
     output path, which does not exist)."""
@@ -106,21 +139,70 @@ def _with_opaque(frame: Frame, ids: np.ndarray, plane) -> np.ndarray:
     return ids if plane is None else opaque_objects(ids, frame.depth_m, frame.camera.K, plane)
 
 
-def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
-                      ) -> tuple[int, list[str]]:
-    """Reconstruct every instance of a frame; returns (meshes written, object messages)."""
+def stage_inputs(source: SceneSource, frame_id: str, stage: str, which_masks: str = "segment",
+                 grasp_source: str = "repaired") -> dict:
+    """The upstream files a stage reads for a frame (see :mod:`sr3d_cli.io.provenance`)."""
+    inputs = {"depth": source.depth_path(frame_id), "camera": source.camera_path(),
+              "masks": masks_path(source, frame_id, which_masks)}
+    if stage in ("segment", "reconstruct"):
+        inputs["rgb"] = source.rgb_path(frame_id)
+    if stage == "segment":
+        del inputs["masks"]
+    if stage in ("align", "repair") or (stage == "grasp" and grasp_source == "repaired"):
+        inputs["meshes"] = source.stage_file("meshes", frame_id, (".json",))
+    if stage == "repair" or (stage == "grasp" and grasp_source == "repaired"):
+        inputs["poses"] = source.stage_file("poses", frame_id, (".json",))
+    if stage == "grasp" and grasp_source == "repaired":
+        inputs["repaired"] = source.prediction_path("repaired", frame_id)
+    return inputs
+
+
+def stage_record(cfg, source: SceneSource, frame_id: str, stage: str) -> dict:
+    """The ``made_from`` record a stage output of this frame made now would carry."""
+    inputs = stage_inputs(source, frame_id, stage, cfg.reconstruct.masks, cfg.grasp.source)
+    if stage == "segment" and cfg.segment.backend == "import" and cfg.segment.import_dir:
+        folder = Path(cfg.segment.import_dir)  # the imported mask, whatever its image suffix
+        inputs["imported"] = next((folder / f"{frame_id}{suffix}" for suffix in
+                                   (".png", ".tif", ".tiff", ".bmp")
+                                   if (folder / f"{frame_id}{suffix}").is_file()), None)
+    record = provenance.made_from(cfg, stage, inputs)
+    record["config"]["io.depth_scale"] = float(cfg.io.depth_scale)
+    return record
+
+
+def record_path(source: SceneSource, frame_id: str, stage: str):
+    folder, suffix = RECORD_FILES[stage]
+    return source.stage_file(folder, frame_id, (suffix,))
+
+
+def stale(cfg, source: SceneSource, frame_id: str, stage: str) -> str | None:
+    """Why a stage's output of this frame must be made again: ``"missing"``, the first
+    difference from its record, or None (current, or made elsewhere without a record)."""
+    path = record_path(source, frame_id, stage)
+    if path is None:
+        return "missing"
+    return provenance.stale_reason(provenance.read_record(path),
+                                   stage_record(cfg, source, frame_id, stage))
+
+
+def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str,
+                      record: dict | None = None) -> tuple[int, list[str]]:
+    """Reconstruct every instance of a frame; returns (meshes written, object messages).
+    Writes ``meshes/<frame>.json`` (the meshes written, with their fingerprints, the object
+    messages, ``frame_failed`` where there are instances and no mesh, and ``record``) and removes
+    meshes of an earlier run no instance has now."""
     source, fid = frame.scene, frame.frame_id
     ids, records = load_instances(source, fid, frame.depth_m.shape, which_masks)
     plane, why = frame_plane(frame, ids, plane_cfg)
-    written, messages = 0, []
+    written, messages, made = 0, [], {}
     seen = _with_opaque(frame, ids, plane)
-    for k, record in sorted(records.items()):
+    for k in sorted(records):
         try:
             if plane is None and reconstructor.cfg.backend != "onnx":
                 raise ValueError(why)
             front = None if plane is None else occluders(seen, k, frame.camera.K, plane)
             result = reconstructor(frame.rgb, ids == k, frame.camera.K, plane,
-                                   record.get("label", ""), frame.depth_m, front)
+                                   records[k].get("label", ""), frame.depth_m, front)
         except ValueError as exc:  # ObjectError, and model/fit failures of this object
             messages.append(f"object {k}: {exc}")
             continue
@@ -132,14 +214,32 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str
             meta = {**meta, "open_alternative": opened.name}
         write_json(mesh_path(source, fid, k, ".json"), meta)
         written += 1
+        made[str(k)] = provenance.fingerprint(mesh_path(source, fid, k))
+    folder = source.out / "meshes" / fid
+    if folder.is_dir():  # meshes of an earlier run that no instance of this one has
+        for path in folder.iterdir():
+            if path.stem.split("_")[0] not in made and path.stem.split("_")[0].isdigit():
+                path.unlink()
+    document = {"objects": made, "failed": messages}
+    if records and not made:
+        document["frame_failed"] = "no mesh made (" + "; ".join(messages) + ")"
+    if record is not None:
+        document[provenance.RECORD_KEY] = record
+    write_json(source.output_path("meshes", fid, ".json"), document)
     return written, messages
 
 
 def load_mesh(path) -> trimesh.Trimesh:
+    """A triangle mesh file (PLY, OBJ, STL...); :class:`InputError` naming it where it cannot be
+    read, has no triangles or holds non-finite vertices."""
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:
-        raise ValueError(f"cannot read mesh {path} ({exc})") from None
+        raise InputError(path, f"cannot read mesh ({type(exc).__name__}: {exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise InputError(path, "mesh has no triangles (truncated or not a mesh)")
+    if not np.isfinite(mesh.vertices).all():
+        raise InputError(path, "mesh has non-finite vertices (NaN or inf)")
     return mesh
 
 
@@ -163,8 +263,9 @@ def _pose_hint(path) -> tuple[np.ndarray, float] | None:
 
 
 def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
-                bop: bool = False) -> tuple[list[dict], list[str]]:
-    """Place every reconstructed object; writes ``poses/<id>.json``. Returns (objects, messages)."""
+                bop: bool = False, record: dict | None = None) -> tuple[list[dict], list[str]]:
+    """Place every reconstructed object; writes ``poses/<id>.json`` (``frame_failed`` where
+    there are instances and none was placed). Returns (objects, messages)."""
     source, fid = frame.scene, frame.frame_id
     ids, records = load_instances(source, fid, frame.depth_m.shape, which_masks)
     plane, why = frame_plane(frame, ids, plane_cfg)
@@ -189,6 +290,10 @@ def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
                         "diagnostics": placement.diagnostics})
     document = {"objects": objects, "failed": messages,
                 "plane": plane.to_json() if plane is not None else None}
+    if records and not objects:
+        document["frame_failed"] = "no object placed (" + "; ".join(messages) + ")"
+    if record is not None:
+        document[provenance.RECORD_KEY] = record
     write_json(source.output_path("poses", fid, ".json"), document)
     return objects, messages
 
@@ -200,9 +305,30 @@ def load_pose_document(source: SceneSource, frame_id: str) -> dict:
         raise InputError(source.out / "poses" / f"{frame_id}.json",
                          "no poses: run `sr3d align` first")
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        document = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
         raise InputError(path, f"cannot read poses ({exc})") from None
+    if not isinstance(document, dict) or not isinstance(document.get("objects", []), list):
+        raise InputError(path, "poses file must hold a mapping with an 'objects' list")
+    for obj in document.get("objects", []):
+        check_placement(obj, path)
+    return document
+
+
+def check_placement(obj, path) -> None:
+    """Raise :class:`InputError` naming ``path`` where a placed object (``id``, ``T_cam_obj``
+    4x4, ``scale`` > 0) has a missing, malformed or non-finite value."""
+    try:
+        k = int(obj["id"])
+        T = np.asarray(obj["T_cam_obj"], dtype=np.float64)
+        scale = float(obj["scale"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(path, f"object without a valid id, T_cam_obj and scale ({exc})") \
+            from None
+    if T.shape != (4, 4) or not np.isfinite(T).all():
+        raise InputError(path, f"object {k}: T_cam_obj must be a finite 4x4")
+    if not (np.isfinite(scale) and scale > 0):
+        raise InputError(path, f"object {k}: scale must be a finite number > 0, got {scale}")
 
 
 def load_poses(source: SceneSource, frame_id: str) -> list[dict]:
@@ -223,68 +349,88 @@ def _read_prediction(source: SceneSource, stage: str, frame_id: str, shape) -> n
 
 
 def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired",
-                only: int | None = None, hand_poses: float | None = None
-                ) -> tuple[int, list[str]]:
+                only: int | None = None, hand_poses: float | None = None,
+                which_masks: str = "segment", record: dict | None = None
+                ) -> tuple[int, list[str], str | None]:
     """Plan grasps for one frame; writes ``grasps/<id>.json`` and ``.npy`` (an empty but valid
-    file, with the reason, when nothing can be planned). Returns (grasps, messages)."""
+    file, with the reason, when nothing can be planned). Returns (grasps, object messages, why
+    the frame failed): a frame fails when an input is missing or unreadable, or when it has
+    objects and none of them got a grasp; a frame without objects does not."""
     from sr3d_cli.grasp import GraspSet
-    from sr3d_cli.grasp.planner import Cloud, depth_cloud, in_view, mesh_cloud
 
-    source, fid, K = frame.scene, frame.frame_id, frame.camera.K
-    cfg = planner.cfg
-    grasps, messages = GraspSet.empty(), []
+    source, fid = frame.scene, frame.frame_id
+    grasps, messages, failure = GraspSet.empty(), [], None
     try:
-        ids, _ = load_instances(source, fid, frame.depth_m.shape)
+        ids, _ = load_instances(source, fid, frame.depth_m.shape, which_masks)
         if only is not None and not (ids == only).any():
-            raise ValueError(f"object {only} is not in masks/{fid}")
+            raise InputError(masks_path(source, fid, which_masks) or fid,
+                             f"object {only} is not in this frame's masks")
         if not (ids > 0).any():
-            raise ValueError("no objects in masks/")
-        depth = frame.depth_m if depth_source == "raw" else \
-            _read_prediction(source, "repaired", fid, frame.depth_m.shape)
-        poses = load_pose_document(source, fid) if depth_source == "repaired" else {}
-        # the table align placed the objects on, else (raw depth, or none recorded) a fresh fit
-        plane = Plane.from_json(poses["plane"]) if poses.get("plane") else None
-        if plane is None:
-            plane, why = frame_plane(frame, ids, plane_cfg)
-            if plane is None:
-                raise ValueError(why)
-        scene = depth_cloud(depth, K, ids, cfg.stride)
-        targets = {int(k): scene.select(scene.labels == k) for k in np.unique(ids) if k > 0}
-        surfaces, fallbacks, axes = {}, {}, {}
-        if depth_source == "repaired":
-            placed, opened = {}, {}
-            for obj in poses.get("objects", []):
-                k = int(obj["id"])
-                path = find_mesh(source, fid, k)
-                T, scale = np.asarray(obj["T_cam_obj"]), float(obj["scale"])
-                axes[k] = T[:3, 2]  # the object frame's z: its height (lying: its length)
-                for mesh, clouds in ((load_mesh(path), placed), (_open_alternative(path), opened)):
-                    if mesh is not None:
-                        clouds[k] = (mesh_cloud(mesh, T, scale, k, cfg.mesh_points, seed=k),
-                                     place_points(mesh.vertices, T, scale)[mesh.faces])
-                targets[k], surfaces[k] = in_view(placed[k][0], K, depth.shape), placed[k][1]
-            # where the closed model gives no grasp: the same scene with the object opened,
-            # its depth left out (rendered from the closed model, it holds the lid on a mouth
-            # that faces the camera)
-            for k, (cloud, triangles) in opened.items():
-                others = [c for j, (c, _) in placed.items() if j != k]
-                fallbacks[k] = (Cloud.concat([scene.select(scene.labels != k)] + others + [cloud]),
-                                in_view(cloud, K, depth.shape), triangles)
-            scene = Cloud.concat([scene] + [c for c, _ in placed.values()])
-        if only is not None:
-            targets = {only: targets[only]}
-        grasps, messages = planner.plan(scene, targets, plane, surfaces, fallbacks, axes)
+            messages.append("no objects in the masks: nothing to grasp")
+        else:
+            grasps, messages = _plan_frame(frame, planner, plane_cfg, depth_source, only, ids)
+            if len(grasps) == 0:
+                failure = "no grasp for any object (" + "; ".join(messages) + ")"
     except (InputError, ValueError) as exc:
         messages.append(str(exc))
+        failure = str(exc)
     document = {"source": depth_source, "grasps": grasps.to_json(), "failed": messages,
                 "frame": "camera (OpenCV), metres; grasp x = approach, y = closing direction, "
                          "position = grasp centre; fingertips reach `depth` past it"}
+    if failure is not None:
+        document["frame_failed"] = failure
+    if record is not None:
+        document[provenance.RECORD_KEY] = record
     write_json(source.output_path("grasps", fid, ".json"), document)
     write_npy(source.output_path("grasps", fid, ".npy"), grasps.to_array())
     if hand_poses is not None:
         write_npy(source.output_path("grasps", fid, "_hand_poses.npy"),
                   grasps.hand_poses(hand_poses))
-    return len(grasps), messages
+    return len(grasps), messages, failure
+
+
+def _plan_frame(frame: Frame, planner, plane_cfg, depth_source: str, only: int | None,
+                ids: np.ndarray):
+    """(grasps, object messages) of a frame with objects ``ids`` (H, W) int32."""
+    from sr3d_cli.grasp.planner import Cloud, depth_cloud, in_view, mesh_cloud
+
+    source, fid, K = frame.scene, frame.frame_id, frame.camera.K
+    cfg = planner.cfg
+    depth = frame.depth_m if depth_source == "raw" else \
+        _read_prediction(source, "repaired", fid, frame.depth_m.shape)
+    poses = load_pose_document(source, fid) if depth_source == "repaired" else {}
+    # the table align placed the objects on, else (raw depth, or none recorded) a fresh fit
+    plane = Plane.from_json(poses["plane"]) if poses.get("plane") else None
+    if plane is None:
+        plane, why = frame_plane(frame, ids, plane_cfg)
+        if plane is None:
+            raise ValueError(why)
+    scene = depth_cloud(depth, K, ids, cfg.stride)
+    targets = {int(k): scene.select(scene.labels == k) for k in np.unique(ids) if k > 0}
+    surfaces, fallbacks, axes = {}, {}, {}
+    if depth_source == "repaired":
+        placed, opened = {}, {}
+        for obj in poses.get("objects", []):
+            k = int(obj["id"])
+            path = find_mesh(source, fid, k)
+            T, scale = np.asarray(obj["T_cam_obj"]), float(obj["scale"])
+            axes[k] = T[:3, 2]  # the object frame's z: its height (lying: its length)
+            for mesh, clouds in ((load_mesh(path), placed), (_open_alternative(path), opened)):
+                if mesh is not None:
+                    clouds[k] = (mesh_cloud(mesh, T, scale, k, cfg.mesh_points, seed=k),
+                                 place_points(mesh.vertices, T, scale)[mesh.faces])
+            targets[k], surfaces[k] = in_view(placed[k][0], K, depth.shape), placed[k][1]
+        # where the closed model gives no grasp: the same scene with the object opened,
+        # its depth left out (rendered from the closed model, it holds the lid on a mouth
+        # that faces the camera)
+        for k, (cloud, triangles) in opened.items():
+            others = [c for j, (c, _) in placed.items() if j != k]
+            fallbacks[k] = (Cloud.concat([scene.select(scene.labels != k)] + others + [cloud]),
+                            in_view(cloud, K, depth.shape), triangles)
+        scene = Cloud.concat([scene] + [c for c, _ in placed.values()])
+    if only is not None:
+        targets = {only: targets[only]}
+    return planner.plan(scene, targets, plane, surfaces, fallbacks, axes)
 
 
 def load_grasps(source: SceneSource, frame_id: str):
@@ -295,8 +441,11 @@ def load_grasps(source: SceneSource, frame_id: str):
         raise InputError(source.out / "grasps" / f"{frame_id}.npy",
                          "no grasps: run `sr3d grasp` first")
     try:
-        return GraspSet.from_array(np.load(path, allow_pickle=False))
-    except (OSError, ValueError) as exc:
+        array = np.load(path, allow_pickle=False)
+        if not np.isfinite(array).all():
+            raise ValueError("non-finite numbers (NaN or inf)")
+        return GraspSet.from_array(array)
+    except (OSError, ValueError, TypeError, EOFError) as exc:
         raise InputError(path, f"cannot read grasps ({exc})") from None
 
 
@@ -322,6 +471,7 @@ def grasp_truth(source: SceneSource, frame_id: str, plane_cfg):
     plane = support_plane(depth, camera.K, plane_cfg, exclude=None if ids is None else ids > 0)
     objects = []
     for obj in gt["objects"]:
+        check_placement(obj, source.gt_objects_path(frame_id))
         mesh = load_mesh(source.root / obj["mesh"])
         verts = place_points(mesh.vertices, np.asarray(obj["T_cam_obj"]), float(obj["scale"]))
         objects.append((int(obj["id"]), trimesh.Trimesh(verts, mesh.faces, process=False)))

@@ -190,7 +190,8 @@ def test_align_cli_reports_objects_without_meshes(synth_set, tmp_path):
     runner = CliRunner()
     runner.invoke(cli, ["segment", str(synth_set / "scene_0003"), "--out", str(out), "-q"])
     result = runner.invoke(cli, ["align", str(synth_set / "scene_0003"), "--out", str(out)])
-    assert result.exit_code == 0
+    assert result.exit_code == 1  # objects, none placed
+    assert "failed: 000000: no object placed" in result.output
     assert "run `sr3d reconstruct` first" in result.output
     assert json.loads((out / "poses" / "000000.json").read_text())["failed"]
 

@@ -498,18 +498,23 @@ def test_graspnet_layout_round_trip():
 
 
 def test_grasp_cli_bad_frames_give_empty_valid_files(synth_set, tmp_path):
+    """A frame that cannot be planned fails (exit 1) and still gets valid files saying why."""
     scene = synth_set / "scene_0001"
     runner = CliRunner()
     out = tmp_path / "nomasks"
     result = runner.invoke(cli, ["grasp", str(scene), "--out", str(out), "-q"])
-    assert result.exit_code == 0, result.output
+    assert result.exit_code == 1, result.output
+    assert "failed: 000000" in result.output and "no masks" in result.output
     doc = json.loads((out / "grasps" / "000000.json").read_text())
     assert doc["grasps"] == [] and "no masks" in doc["failed"][0]
+    assert "no masks" in doc["frame_failed"]
     assert np.load(out / "grasps" / "000000.npy").shape == (0, 17)
     # masks but no repaired depth
     result = runner.invoke(cli, ["segment", str(scene), "--out", str(out), "-q"])
     assert result.exit_code == 0, result.output
-    result = runner.invoke(cli, ["grasp", str(scene), "--out", str(out), "-q"])
+    result = runner.invoke(cli, ["grasp", str(scene), "--out", str(out), "-q",
+                                 "--skip-existing"])  # a failed frame is not done
+    assert result.exit_code == 1, result.output
     doc = json.loads((out / "grasps" / "000000.json").read_text())
     assert doc["grasps"] == [] and "no repaired depth" in doc["failed"][0]
 
@@ -878,7 +883,8 @@ def test_the_open_fallback_is_planned_without_the_closed_models_depth(tmp_path):
     write_depth(out / "repaired" / "000000.png", depth, 0.001)
     source, = discover_scenes(scene, IOConfig(), out)
     cfg = Config()
-    count, messages = grasp_frame(source.load_frame("000000"), Planner(cfg.grasp), cfg.plane)
+    count, messages, _ = grasp_frame(source.load_frame("000000"), Planner(cfg.grasp),
+                                     cfg.plane)
     assert count > 0 and not messages, messages
     grasps = load_grasps(source, "000000").sorted()
     assert np.all(grasps.widths < 0.02)  # across the wall

@@ -15,13 +15,28 @@ from sr3d_cli.cli.segment import segment
 from sr3d_cli.cli.synth import synth
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class Sr3dGroup(click.Group):
+    """The command group; Ctrl-C ends any command with exit code 130 and one line, no
+    traceback (files already written are whole: every write is atomic)."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            from sr3d_cli.cli.report import INTERRUPTED, say
+
+            say("interrupted")
+            raise SystemExit(INTERRUPTED) from None
+
+
+@click.group(cls=Sr3dGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="sr3d")
 def cli():
     """Repair the depth of transparent and specular objects from one RGB-D frame.
 
     Every command reads and writes scene folders (see README: "Scene folder").
-    Exit codes: 0 all done, 1 some frames failed, 2 usage or configuration error.
+    Exit codes: 0 all done, 1 some frames failed, 2 usage or configuration error,
+    130 interrupted (Ctrl-C).
     """
 
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from sr3d_cli.cli.options import common_options, load_config, scene_options
+from sr3d_cli.cli.options import (check_masks, common_options, load_config, masks_option,
+                                  scene_options)
 from sr3d_cli.cli.stage_loop import batch_options, run_frames
 
 
@@ -12,8 +13,7 @@ from sr3d_cli.cli.stage_loop import batch_options, run_frames
 @click.argument("scene", type=click.Path(exists=True, file_okay=False))
 @click.option("--mode", type=click.Choice(["sr3d", "paper"]), default=None,
               help="sr3d (plane prior + refinement, default) or the paper's plain method.")
-@click.option("--masks", "masks", type=click.Choice(["segment", "gt"]), default=None,
-              help="Instance masks: masks/ from segment (default) or the ground truth.")
+@masks_option
 @click.option("--bop", is_flag=True,
               help="Also write scene_gt.json per scene (BOP: cam_R_m2c, cam_t_m2c in mm).")
 @batch_options
@@ -22,15 +22,21 @@ from sr3d_cli.cli.stage_loop import batch_options, run_frames
 def align(scene, mode, masks, bop, batch, out, frames, fmt):
     """Write poses/<frame>.json: T_cam_obj, scale, view and silhouette scores, diagnostics."""
     from sr3d_cli.align import Aligner
+    from sr3d_cli.errors import FrameFailed
     from sr3d_cli.io.atomic import write_json
     from sr3d_cli.io.formats.bop import bop_scene_gt
-    from sr3d_cli.stages import align_frame, load_poses
+    from sr3d_cli.stages import align_frame, load_poses, stage_record, stale
 
     cfg = load_config({"align.mode": mode, "reconstruct.masks": masks, "io.format": fmt})
+    check_masks(cfg)
     aligner = Aligner(cfg.align)
 
     def work(frame):
-        _, messages = align_frame(frame, aligner, cfg.plane, cfg.reconstruct.masks)
+        objects, messages = align_frame(
+            frame, aligner, cfg.plane, cfg.reconstruct.masks,
+            record=stage_record(cfg, frame.scene, frame.frame_id, "align"))
+        if not objects and messages:  # instances, and none placed
+            raise FrameFailed("no object placed (" + "; ".join(messages) + ")")
         return messages
 
     def write_bop(scenes):
@@ -43,4 +49,5 @@ def align(scene, mode, masks, bop, batch, out, frames, fmt):
 
     run_frames("align", scene, cfg, out, frames, work, batch=batch,
                outputs=lambda source, fid: [source.output_path("poses", fid, ".json")],
+               stale=lambda source, fid: stale(cfg, source, fid, "align"),
                after=write_bop if bop else None)

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
-from sr3d_cli.cli.batch import iter_frames, open_scenes
+from sr3d_cli.cli.batch import check_writable, iter_frames, open_scenes
 from sr3d_cli.cli.options import UsageExit, common_options, load_config, scene_options
 from sr3d_cli.cli.report import Report
 
@@ -105,6 +105,7 @@ def evaluate(scene, preds, only_valid, mask_source, plot, grasps, contacts, out,
     report = Report(verbose=ctx.meta["sr3d.verbose"])
     out_root = Path(out) if out else Path(scene)
     scenes = open_scenes(scene, cfg, out)
+    check_writable(out_root)
     pairs = list(iter_frames(scenes, frames, report))
     per_frame: dict[str, dict] = {}
     for source, frame_id in tqdm(pairs, desc="evaluate", unit="frame",
@@ -159,7 +160,9 @@ def _evaluate_grasps(scene, out, frames, fmt, contacts: str = "grid"):
     report = Report(verbose=ctx.meta["sr3d.verbose"])
     out_root = Path(out) if out else Path(scene)
     per_frame: dict[str, dict] = {}
-    pairs = list(iter_frames(open_scenes(scene, cfg, out), frames, report))
+    scenes = open_scenes(scene, cfg, out)
+    check_writable(out_root)
+    pairs = list(iter_frames(scenes, frames, report))
     for source, frame_id in tqdm(pairs, desc="evaluate grasps", unit="frame",
                                  disable=ctx.meta["sr3d.quiet"]):
         try:

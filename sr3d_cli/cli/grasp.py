@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from sr3d_cli.cli.options import common_options, load_config, scene_options
+from sr3d_cli.cli.options import (check_masks, common_options, load_config, masks_option,
+                                  scene_options)
 from sr3d_cli.cli.stage_loop import batch_options, run_frames
 
 
@@ -13,6 +14,7 @@ from sr3d_cli.cli.stage_loop import batch_options, run_frames
 @click.option("--object", "only", type=int, default=None, help="Plan for this object id only.")
 @click.option("--from", "depth_source", type=click.Choice(["repaired", "raw"]), default=None,
               help="Plan on the repaired scene (default) or on the raw sensor depth.")
+@masks_option
 @click.option("--hand-poses", is_flag=True,
               help="Also write grasps/<frame>_hand_poses.npy: (n, 4, 4) hand poses, "
                    "Contact-GraspNet convention.")
@@ -21,21 +23,36 @@ from sr3d_cli.cli.stage_loop import batch_options, run_frames
 @batch_options
 @scene_options
 @common_options
-def grasp(scene, only, depth_source, hand_poses, preview, batch, out, frames, fmt):
+def grasp(scene, only, depth_source, masks, hand_poses, preview, batch, out, frames, fmt):
     """Propose 6-DoF parallel-jaw grasps per object: writes grasps/<frame>.json and .npy
     (graspnetAPI's 17 numbers per grasp). Needs masks/ and, unless --from raw, repaired/ and
-    poses/ (run `sr3d repair-depth` first)."""
+    poses/ (run `sr3d repair-depth` first). A frame with objects and no grasp fails (exit 1);
+    its grasps file says why."""
+    from sr3d_cli.errors import FrameFailed
     from sr3d_cli.grasp.planner import Planner
+    from sr3d_cli.pipeline import Pipeline
     from sr3d_cli.io.atomic import write_png
     from sr3d_cli.io.preview import grasp_preview
-    from sr3d_cli.stages import grasp_frame, load_grasps
+    from sr3d_cli.stages import grasp_frame, load_grasps, stage_record, stale
 
-    cfg = load_config({"io.format": fmt, "grasp.source": depth_source})
+    cfg = load_config({"io.format": fmt, "grasp.source": depth_source,
+                       "reconstruct.masks": masks})
+    check_masks(cfg)
     planner = Planner(cfg.grasp)
+    pipeline = Pipeline(cfg)  # only to tell whether the stage outputs planned on are current
 
     def work(frame):
-        n, messages = grasp_frame(frame, planner, cfg.plane, cfg.grasp.source, only,
-                                  cfg.grasp.base_to_tip if hand_poses else None)
+        n, messages, failure = grasp_frame(
+            frame, planner, cfg.plane, cfg.grasp.source, only,
+            cfg.grasp.base_to_tip if hand_poses else None, cfg.reconstruct.masks,
+            stage_record(cfg, frame.scene, frame.frame_id, "grasp"))
+        if failure is not None:
+            raise FrameFailed(failure)
+        if cfg.grasp.source == "repaired":
+            why = pipeline.stale_chain(frame.scene, frame.frame_id)
+            if why is not None:
+                messages = messages + [f"planned on stale outputs ({why}): run "
+                                       "`sr3d repair-depth` to make them again"]
         if preview:
             write_png(frame.scene.output_path("grasps", frame.frame_id, "_preview.png"),
                       grasp_preview(frame.rgb, load_grasps(frame.scene, frame.frame_id),
@@ -44,4 +61,5 @@ def grasp(scene, only, depth_source, hand_poses, preview, batch, out, frames, fm
 
     run_frames("grasp", scene, cfg, out, frames, work, batch=batch,
                outputs=lambda source, fid: [source.output_path("grasps", fid, ".json"),
-                                            source.output_path("grasps", fid, ".npy")])
+                                            source.output_path("grasps", fid, ".npy")],
+               stale=lambda source, fid: stale(cfg, source, fid, "grasp"))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import functools
 import logging
-import sys
+import warnings
 
 import click
 
@@ -26,15 +26,19 @@ class UsageExit(click.ClickException):
 def setup_logging(verbose: int, quiet: bool) -> None:
     level = logging.ERROR if quiet else (logging.DEBUG if verbose > 1 else
                                          logging.INFO if verbose else logging.WARNING)
-    handler = logging.StreamHandler(sys.stderr)
+    from sr3d_cli.cli.report import TqdmHandler
+
+    handler = TqdmHandler()
     handler.setFormatter(logging.Formatter("%(message)s"))
     log.handlers[:] = [handler]
     log.setLevel(level)
     log.propagate = False
+    if not verbose:  # numerical warnings of the core are for -v
+        warnings.simplefilter("ignore")
 
 
 def common_options(func):
-    """``--config``, ``--set``, ``-v``, ``-q``: every command."""
+    """``--config``, ``--set``, ``-v``, ``-q``, ``--report``: every command."""
 
     @click.option("--config", "config_path", type=click.Path(dir_okay=False),
                   help="YAML config (every key: configs/default.yaml).")
@@ -42,10 +46,13 @@ def common_options(func):
                   help="Override one config key; repeatable. Flags still win.")
     @click.option("-v", "--verbose", count=True, help="More messages; -v shows tracebacks.")
     @click.option("-q", "--quiet", is_flag=True, help="Only errors on stderr, no progress bar.")
+    @click.option("--report", "report_path", type=click.Path(dir_okay=False), default=None,
+                  help="Also write the closing summary as JSON (counts, each failure's reason).")
     @functools.wraps(func)
-    def wrapper(*args, config_path, sets, verbose, quiet, **kwargs):
+    def wrapper(*args, config_path, sets, verbose, quiet, report_path, **kwargs):
         setup_logging(verbose, quiet)
         ctx = click.get_current_context()
+        ctx.meta["sr3d.report"] = report_path
         ctx.meta["sr3d.verbose"] = verbose
         ctx.meta["sr3d.quiet"] = quiet
         ctx.meta["sr3d.config"] = (config_path, sets)
@@ -75,3 +82,22 @@ def load_config(flags: dict | None = None) -> Config:
         return build_config(path, sets, flags)
     except ConfigError as exc:
         raise UsageExit(str(exc)) from None
+
+
+def masks_option(func):
+    """``--masks segment|gt|DIR``: the instance masks a stage uses (reconstruct.masks)."""
+    return click.option(
+        "--masks", "masks", metavar="segment|gt|DIR", default=None,
+        help="Instance masks: masks/ from segment (default), the ground truth (gt/masks; "
+             "ClearGrasp's -mask.png and TransCG's gt masks in place), or a folder of "
+             "<frame>.png masks made elsewhere (binary masks split into components).")(func)
+
+
+def check_masks(cfg: Config) -> None:
+    """A usage error where reconstruct.masks is neither segment, gt nor a folder."""
+    from pathlib import Path
+
+    which = cfg.reconstruct.masks
+    if which not in ("segment", "gt") and not Path(which).is_dir():
+        raise UsageExit(f"--masks / reconstruct.masks: {which!r} is neither segment, gt nor "
+                        "a folder")

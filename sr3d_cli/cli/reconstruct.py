@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import click
 
-from sr3d_cli.cli.options import UsageExit, common_options, load_config, scene_options
+from sr3d_cli.cli.options import (UsageExit, check_masks, common_options, load_config,
+                                  masks_option, scene_options)
 from sr3d_cli.cli.stage_loop import batch_options, run_frames
-from sr3d_cli.errors import InputError
+from sr3d_cli.errors import FrameFailed, InputError
 
 
 @click.command()
 @click.argument("scene", type=click.Path(exists=True, file_okay=False))
 @click.option("--backend", type=click.Choice(["revolution", "onnx", "library"]), default=None,
               help="Reconstruction backend (default: reconstruct.backend).")
-@click.option("--masks", "masks", type=click.Choice(["segment", "gt"]), default=None,
-              help="Use masks/ from segment (default) or the ground-truth masks.")
+@masks_option
 @click.option("--library", type=click.Path(exists=True, file_okay=False), default=None,
               help="Folder of meshes (implies --backend library).")
 @batch_options
@@ -23,21 +23,26 @@ from sr3d_cli.errors import InputError
 def reconstruct(scene, backend, masks, library, batch, out, frames, fmt):
     """Write meshes/<frame>/<k>.ply (object frame: base centre, +z up the axis, height 1)."""
     from sr3d_cli.reconstruct import Reconstructor
-    from sr3d_cli.stages import mesh_outputs, reconstruct_frame
+    from sr3d_cli.stages import reconstruct_frame, stage_record, stale
 
     if library and backend is None:
         backend = "library"
     cfg = load_config({"reconstruct.backend": backend, "reconstruct.masks": masks,
                        "reconstruct.library": library, "io.format": fmt})
+    check_masks(cfg)
     try:
         reconstructor = Reconstructor(cfg.reconstruct)
     except InputError as exc:
         raise UsageExit(str(exc)) from None
 
     def work(frame):
-        _, messages = reconstruct_frame(frame, reconstructor, cfg.plane,
-                                              cfg.reconstruct.masks)
+        written, messages = reconstruct_frame(
+            frame, reconstructor, cfg.plane, cfg.reconstruct.masks,
+            stage_record(cfg, frame.scene, frame.frame_id, "reconstruct"))
+        if written == 0 and messages:  # instances, and no mesh for any
+            raise FrameFailed("no mesh made (" + "; ".join(messages) + ")")
         return messages
 
     run_frames("reconstruct", scene, cfg, out, frames, work, batch=batch,
-               outputs=mesh_outputs)
+               outputs=lambda source, fid: [source.output_path("meshes", fid, ".json")],
+               stale=lambda source, fid: stale(cfg, source, fid, "reconstruct"))

@@ -4,7 +4,9 @@ With ``workers > 1`` frames are spread over forked processes (each frame is inde
 writes only its own files); results come back in order of completion. ``--shard i/N`` keeps the
 frames whose key hashes to i (stable across runs and machines, so N cluster jobs split a dataset
 without talking to each other); ``--skip-existing`` leaves frames whose outputs all exist (every
-file is written atomically, so an existing file is a whole one).
+file is written atomically, so an existing file is a whole one) and still match what they were
+made from (:mod:`sr3d_cli.io.provenance`); ``--keep-stale`` keeps those that do not, with a
+warning.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import functools
 import logging
 import multiprocessing
+import signal
 import traceback
 import zlib
 from pathlib import Path
@@ -20,7 +23,7 @@ from typing import Callable
 import click
 from tqdm import tqdm
 
-from sr3d_cli.cli.batch import iter_frames, open_scenes
+from sr3d_cli.cli.batch import check_writable, iter_frames, open_scenes
 from sr3d_cli.cli.report import Report
 from sr3d_cli.config import Config
 from sr3d_cli.errors import Sr3dError
@@ -31,15 +34,26 @@ log = logging.getLogger("sr3d")
 _JOB: dict = {}  # the forked workers inherit the work function and the frame list
 
 
+def _worker_init() -> None:
+    """In a worker: Ctrl-C is the parent's to handle; the parent's terminate() (SIGTERM) unwinds
+    the frame in progress, so its temporary file is removed."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _stop_worker)
+
+
+def _stop_worker(signum, frame):
+    raise SystemExit(1)
+
+
 def _run_one(index: int):
+    """(index, messages, failure message or None, traceback or None) of one frame."""
     source, frame_id = _JOB["pairs"][index]
     try:
-        return index, _JOB["work"](source.load_frame(frame_id)), None
-    except Exception as exc:  # sent back to the parent, reported there
-        if isinstance(exc, Sr3dError):
-            return index, None, exc
-        return index, None, RuntimeError(f"{type(exc).__name__}: {exc}\n"
-                                         f"{traceback.format_exc()}")
+        return index, _JOB["work"](source.load_frame(frame_id)), None, None
+    except Exception as exc:  # sent back to the parent as text, reported there
+        reason = str(exc) if isinstance(exc, Sr3dError) else \
+            f"unexpected {type(exc).__name__}: {exc}"
+        return index, None, reason, traceback.format_exc()
 
 
 def parse_shard(spec: str | None) -> tuple[int, int] | None:
@@ -59,55 +73,94 @@ def in_shard(key: str, shard: tuple[int, int] | None) -> bool:
     return shard is None or zlib.crc32(key.encode("utf-8")) % shard[1] == shard[0]
 
 
+def _finished(source: SceneSource, frame_id: str, paths: list[Path],
+              stale: Callable[[SceneSource, str], str | None] | None, keep_stale: bool
+              ) -> str | None:
+    """Why ``--skip-existing`` may leave a frame (None: it must run): its outputs exist, did not
+    record a failed frame, and are current (or stale and ``keep_stale``)."""
+    if not all(p.is_file() for p in paths):
+        return None
+    for p in paths:
+        if p.suffix == ".json":
+            try:
+                if "frame_failed" in p.read_text(encoding="utf-8"):
+                    return None
+            except OSError:
+                return None
+    why = stale(source, frame_id) if stale is not None else None
+    if why is None:
+        return "outputs exist and are current (--skip-existing)"
+    if keep_stale:
+        log.warning("warning: %s: keeping stale outputs (%s; --keep-stale)",
+                    source.frame_key(frame_id), why)
+        return "outputs exist, stale, kept (--keep-stale)"
+    log.info("%s: outputs are stale (%s): made again", source.frame_key(frame_id), why)
+    return None
+
+
 def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str | None,
                work: Callable[[Frame], list[str]], *, batch: dict | None = None,
                outputs: Callable[[SceneSource, str], list[Path]] | None = None,
-               after: Callable[[list[SceneSource]], None] | None = None) -> None:
+               after: Callable[[list[SceneSource]], None] | None = None,
+               stale: Callable[[SceneSource, str], str | None] | None = None) -> None:
     """Load each selected frame and call ``work(frame)``, which returns object-level messages
-    (printed as warnings). Exceptions fail that frame only. ``batch``: the values of
-    :func:`batch_options` (workers, shard, skip_existing); ``outputs(scene, frame_id)``: the files
-    that mark a frame done; ``after(scenes)`` runs once the frames are done. Exits with the
-    report's code."""
+    (printed as warnings) or raises (that frame fails; :class:`~sr3d_cli.errors.FrameFailed`
+    when it wrote outputs that say why). ``batch``: the values of :func:`batch_options`;
+    ``outputs(scene, frame_id)``: the files that mark a frame done; ``stale(scene, frame_id)``:
+    why those outputs no longer match their inputs (None: current); ``after(scenes)`` runs once
+    the frames are done. Ctrl-C stops the workers and exits 130. Exits with the report's
+    code."""
     ctx = click.get_current_context()
     report = Report(verbose=ctx.meta["sr3d.verbose"])
     batch = batch or {}
     workers = batch.get("workers", 1)
     shard = parse_shard(batch.get("shard"))
     scenes = open_scenes(scene, cfg, out)
+    for source in scenes:
+        check_writable(source.out)
     pairs = [(s, f) for s, f in iter_frames(scenes, frames, report)
              if in_shard(s.frame_key(f), shard)]
     if batch.get("skip_existing") and outputs is not None:
         todo = []
         for s, f in pairs:
-            if all(p.is_file() for p in outputs(s, f)):
-                report.skip(s.frame_key(f), "outputs exist (--skip-existing)")
+            why = _finished(s, f, outputs(s, f), stale, batch.get("keep_stale", False))
+            if why is not None:
+                report.skip(s.frame_key(f), why)
             else:
                 todo.append((s, f))
         pairs = todo
     _JOB.update(pairs=pairs, work=work)
     bar = tqdm(total=len(pairs), desc=name, unit="frame", disable=ctx.meta["sr3d.quiet"])
-    if workers > 1 and len(pairs) > 1:
-        pool = multiprocessing.get_context("fork").Pool(min(workers, len(pairs)))
-        results = pool.imap_unordered(_run_one, range(len(pairs)))
-    else:
-        pool, results = None, map(_run_one, range(len(pairs)))
+    pool = None
     try:
-        for index, messages, error in results:
+        if workers > 1 and len(pairs) > 1:
+            pool = multiprocessing.get_context("fork").Pool(min(workers, len(pairs)),
+                                                            initializer=_worker_init)
+            results = pool.imap_unordered(_run_one, range(len(pairs)))
+        else:
+            results = map(_run_one, range(len(pairs)))
+        for index, messages, failure, details in results:
             source, frame_id = pairs[index]
             key = source.frame_key(frame_id)
             bar.update()
-            if error is not None:
-                report.fail(key, error)
+            if failure is not None:
+                report.fail(key, failure, details=details)
                 continue
             for message in messages:
                 log.warning("warning: %s %s", key, message)
             report.ok()
-    finally:
-        bar.close()
         if pool is not None:
             pool.close()
             pool.join()
-    if after is not None:
+            pool = None
+    except KeyboardInterrupt:
+        report.interrupted = True
+    finally:
+        if pool is not None:  # interrupted: stop the workers, their frames unwound
+            pool.terminate()
+            pool.join()
+        bar.close()
+    if after is not None and not report.interrupted:
         after(scenes)
     report.finish("frames")
 
@@ -121,11 +174,16 @@ def batch_options(func):
                   help="Only the frames of shard I of N (0-based; stable split, e.g. a Slurm "
                        "array or Kubernetes indexed job: --shard $IDX/$COUNT).")
     @click.option("--skip-existing", is_flag=True,
-                  help="Leave frames whose outputs exist (resume an interrupted run).")
+                  help="Leave frames whose outputs exist and are current (resume an "
+                       "interrupted run); stale ones are made again.")
+    @click.option("--keep-stale", is_flag=True,
+                  help="Keep outputs whose recorded inputs or config keys changed (with a "
+                       "warning) instead of making them again.")
     @functools.wraps(func)
-    def wrapper(*args, workers, shard, skip_existing, **kwargs):
+    def wrapper(*args, workers, shard, skip_existing, keep_stale, **kwargs):
         parse_shard(shard)  # a bad spec is a usage error before any work
         return func(*args, batch={"workers": workers, "shard": shard,
-                                  "skip_existing": skip_existing}, **kwargs)
+                                  "skip_existing": skip_existing, "keep_stale": keep_stale},
+                    **kwargs)
 
     return wrapper

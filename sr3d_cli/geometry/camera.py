@@ -26,11 +26,13 @@ class Camera:
         K = np.asarray(self.K, dtype=np.float64)
         if K.shape != (3, 3):
             raise ValueError(f"K must be 3x3, got {K.shape}")
+        if not np.isfinite(K).all():
+            raise ValueError("K must hold finite numbers")
         if not (K[0, 0] > 0 and K[1, 1] > 0):
             raise ValueError("focal lengths must be positive")
         if self.width < 0 or self.height < 0:
             raise ValueError("image size must not be negative")
-        if not self.depth_scale > 0:
+        if not (self.depth_scale > 0 and np.isfinite(self.depth_scale)):
             raise ValueError("depth_scale must be positive")
         object.__setattr__(self, "K", K)
 

@@ -314,7 +314,7 @@ class Planner:
         has_normal = np.linalg.norm(target.normals, axis=1) > 0.5
         target = target.select(has_normal)
         if len(target.points) < 20:
-            return GraspSet.empty(), f"{len(target.points)} surface points, too few"
+            return GraspSet.empty(), f"{len(target.points)} surface points, too few", np.inf
         top = max(float(plane.height(target.points).max()), 1e-6)
         centre = target.points.mean(axis=0)
         radius = g.reach() + np.ptp(target.points, axis=0).max()

@@ -1,7 +1,9 @@
 """Atomic file writing: a temporary file in the same folder, flushed, then renamed over the target.
 
 A run killed at any moment leaves either the old file or the new one, never part of one.
-Every writer in sr3d goes through :func:`write_bytes`.
+Every writer in sr3d goes through :func:`write_bytes`. Files get the permissions a plain
+``open()`` would give them (0666 less the umask: 0644 by default); a file written over keeps
+its own.
 """
 
 from __future__ import annotations
@@ -16,11 +18,28 @@ import cv2
 import numpy as np
 
 
+_UMASK: list[int] = []
+
+
+def _new_file_mode() -> int:
+    """0666 less the process umask (read once: reading it means setting it)."""
+    if not _UMASK:
+        mask = os.umask(0o022)
+        os.umask(mask)
+        _UMASK.append(mask)
+    return 0o666 & ~_UMASK[0]
+
+
 def write_bytes(path: str | Path, data: bytes) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        mode = path.stat().st_mode & 0o7777
+    except OSError:
+        mode = _new_file_mode()
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        os.fchmod(fd, mode)
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
             fh.flush()

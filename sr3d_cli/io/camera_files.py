@@ -16,6 +16,7 @@ Recognised by content (the file name does not matter):
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 from typing import Any
@@ -33,33 +34,48 @@ def _K(fx, fy, cx, cy) -> np.ndarray:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]], dtype=np.float64)
 
 
-def _from_mapping(data: dict[str, Any], path: Path, depth_scale: float) -> Camera:
+def _from_mapping(data: dict[str, Any], path: Path, depth_scale: float,
+                  notes: list[str] | None = None) -> Camera:
     def num(key, src=data):
         value = src[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise InputError(path, f"'{key}' must be a number, got {value!r}")
         return float(value)
 
-    scale = float(data.get("depth_scale", depth_scale))
+    def size(key):
+        value = data[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                not math.isfinite(value) or value < 0 or value != int(value):
+            raise InputError(path, f"'{key}' must be a whole number of pixels, got {value!r}")
+        return int(value)
+
+    scale = data.get("depth_scale", depth_scale)
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or \
+            not math.isfinite(scale) or scale <= 0:
+        raise InputError(path, f"'depth_scale' must be a positive number, got {scale!r}")
+    scale = float(scale)
+    if "depth_scale" not in data and notes is not None and "xres" not in data:
+        notes.append(f"{path}: no depth_scale; assuming io.depth_scale = {depth_scale:g} "
+                     "m per depth unit")
     if "K" in data and isinstance(data["K"], list) and len(data["K"]) == 3:  # native
         K = np.asarray(data["K"], dtype=np.float64)
-        return Camera(K, int(data["width"]), int(data["height"]), scale, str(path))
+        return Camera(K, size("width"), size("height"), scale, str(path))
     if "intrinsic_matrix" in data:  # Open3D, column-major
         K = np.asarray(data["intrinsic_matrix"], dtype=np.float64).reshape(3, 3).T
-        return Camera(K, int(data["width"]), int(data["height"]), scale, str(path))
+        return Camera(K, size("width"), size("height"), scale, str(path))
     if "ppx" in data:  # RealSense rs2_intrinsics
         K = _K(num("fx"), num("fy"), num("ppx"), num("ppy"))
-        return Camera(K, int(data["width"]), int(data["height"]), scale, str(path))
+        return Camera(K, size("width"), size("height"), scale, str(path))
     if "camera_matrix" in data:  # ROS camera_calibration YAML
         K = np.asarray(data["camera_matrix"]["data"], dtype=np.float64).reshape(3, 3)
-        return Camera(K, int(data["image_width"]), int(data["image_height"]), scale, str(path))
+        return Camera(K, size("image_width"), size("image_height"), scale, str(path))
     for key in ("K", "k"):  # ROS CameraInfo message (flat 9 numbers)
         if key in data and "width" in data:
             K = np.asarray(data[key], dtype=np.float64).reshape(3, 3)
-            return Camera(K, int(data["width"]), int(data["height"]), scale, str(path))
+            return Camera(K, size("width"), size("height"), scale, str(path))
     if "xres" in data:  # ClearGrasp
         K = _K(num("fx"), num("fy"), num("cx"), num("cy"))
-        return Camera(K, int(data["xres"]), int(data["yres"]), scale, str(path))
+        return Camera(K, size("xres"), size("yres"), scale, str(path))
     raise InputError(path, "unrecognised camera file: expected native, Open3D, RealSense, ROS "
                            "CameraInfo or ClearGrasp intrinsics")
 
@@ -87,8 +103,10 @@ def _matrix_only(K: np.ndarray, path: Path, depth_scale: float) -> Camera:
         raise InputError(path, str(exc)) from None
 
 
-def load_camera(path: str | Path, depth_scale: float = 0.001) -> Camera:
-    """Read any supported intrinsics file. ``depth_scale`` is used when the file has none.
+def load_camera(path: str | Path, depth_scale: float = 0.001,
+                notes: list[str] | None = None) -> Camera:
+    """Read any supported intrinsics file. ``depth_scale`` is used when the file has none (a
+    notice naming the file and the scale assumed is appended to ``notes``).
 
     A bare 3x3 matrix gives a camera with ``width == height == 0``: call
     :func:`fit_camera_to_image` with the image size.
@@ -98,6 +116,9 @@ def load_camera(path: str | Path, depth_scale: float = 0.001) -> Camera:
         raise InputError(path, "camera file does not exist")
     suffix = path.suffix.lower()
     try:
+        if suffix in (".npy", ".txt") and notes is not None:
+            notes.append(f"{path}: a bare matrix has no depth_scale; assuming io.depth_scale = "
+                         f"{depth_scale:g} m per depth unit")
         if suffix == ".npy":
             return _matrix_only(np.load(path, allow_pickle=False).astype(np.float64), path,
                                 depth_scale)
@@ -109,17 +130,17 @@ def load_camera(path: str | Path, depth_scale: float = 0.001) -> Camera:
         data = json.loads(text) if suffix == ".json" else yaml.safe_load(text)
     except InputError:
         raise
-    except (ValueError, OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+    except (ValueError, OSError, EOFError, TypeError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise InputError(path, f"cannot parse camera file ({exc})") from None
     if not isinstance(data, dict):
         raise InputError(path, "camera file must hold a mapping")
     try:
-        cam = _from_mapping(data, path, depth_scale)
+        cam = _from_mapping(data, path, depth_scale, notes)
     except InputError:
         raise
     except KeyError as exc:
         raise InputError(path, f"camera file lacks {exc}") from None
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise InputError(path, f"incomplete camera file ({type(exc).__name__}: {exc})") from None
     if "xres" in data:
         precise = _cleargrasp_parameters(path)

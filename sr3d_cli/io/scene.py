@@ -75,6 +75,16 @@ class SceneSource:
                         if p.is_file() and p.suffix.lower() in images.RGB_SUFFIXES
                         and not p.name.startswith("."))
 
+    def orphan_depth(self, frame_ids: list[str]) -> list[Path]:
+        """Depth files without a colour image among ``frame_ids`` (native layout: the frames
+        are the colour images, so these would be left out silently)."""
+        folder, known = self.root / "depth", set(frame_ids)
+        if self.layout != "native" or not folder.is_dir():
+            return []
+        return sorted(p for p in folder.iterdir()
+                      if p.is_file() and p.suffix.lower() in images.DEPTH_SUFFIXES
+                      and not p.name.startswith(".") and p.stem not in known)
+
     def _find(self, folder: Path, frame_id: str, suffixes) -> Path | None:
         for suffix in suffixes:
             p = folder / f"{frame_id}{suffix}"
@@ -111,7 +121,10 @@ class SceneSource:
     def camera(self) -> Camera:
         """Intrinsics as found in the scene (size not yet matched to the images)."""
         if self._camera is None:
-            self._camera = load_camera(self.camera_path(), self.io.depth_scale)
+            notes: list[str] = []
+            self._camera = load_camera(self.camera_path(), self.io.depth_scale, notes)
+            for note in notes:
+                self._notice(note)
         return self._camera
 
     # ---- outputs ----------------------------------------------------------------------------
@@ -131,6 +144,8 @@ class SceneSource:
             raise InputError(path, f"depth is {depth.shape[1]}x{depth.shape[0]} but the colour "
                                    f"image is {shape[1]}x{shape[0]}")
         valid = depth[depth > 0]
+        if not valid.size:
+            raise InputError(path, "no valid depth reading (every pixel is 0 or NaN)")
         if valid.size:
             median = float(np.median(valid))
             if not (self.io.min_median_depth <= median <= self.io.max_median_depth):
@@ -165,9 +180,12 @@ class SceneSource:
         if path is None:
             return None
         try:
-            return json.loads(path.read_text(encoding="utf-8"))
+            document = json.loads(path.read_text(encoding="utf-8"))
         except (ValueError, OSError) as exc:
             raise InputError(path, f"cannot read JSON ({exc})") from None
+        if not isinstance(document, dict) or not isinstance(document.get("objects", []), list):
+            raise InputError(path, "expected a mapping with an 'objects' list")
+        return document
 
     # ---- predictions (evaluate) -------------------------------------------------------------
     def stage_file(self, stage: str, frame_id: str, suffixes) -> Path | None:

@@ -20,6 +20,7 @@ from sr3d_cli.cli import cli
 from sr3d_cli.errors import InputError
 from sr3d_cli.io.camera_files import load_camera
 from sr3d_cli.io.images import read_depth, read_mask, read_rgb
+from sr3d_cli.stages import load_mesh
 from tests.conftest import make_native_scene
 
 READERS = {
@@ -29,10 +30,14 @@ READERS = {
     "mask.png": read_mask,
     "camera.json": load_camera,
     "camera.yaml": load_camera,
+    "K.npy": load_camera,
+    "mesh.ply": load_mesh,
+    "mesh.obj": load_mesh,
+    "depth.exr": lambda p: read_depth(p, 0.001),
 }
 
 
-@settings(max_examples=60, deadline=None,
+@settings(max_examples=100, deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(name=st.sampled_from(sorted(READERS)), data=st.binary(max_size=300))
 def test_readers_never_crash_on_arbitrary_bytes(tmp_path, name, data):
