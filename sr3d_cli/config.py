@@ -187,6 +187,8 @@ class EvaluateConfig:
     mask: str = "auto"
     plot: bool = False
     plot_max_error: float = 0.05
+    protocol: str = "native"
+    resolution: str = ""
 
 
 @dataclass
@@ -214,6 +216,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "grasp.source": ("repaired", "raw"),
     "evaluate.holes": ("full", "ignore"),
     "evaluate.mask": ("auto", "gt", "pred"),
+    "evaluate.protocol": ("native", "transcg", "cleargrasp"),
 }
 
 
