@@ -109,6 +109,7 @@ def evaluate(scene, preds, only_valid, mask_source, protocol, resolution, plot, 
         raise UsageExit("--contacts goes with --grasps")
     from sr3d_cli import evaluate as core
     from sr3d_cli.io.atomic import write_json, write_png, write_text
+    from sr3d_cli.io.preview import error_map_figure
 
     cfg = load_config({
         "evaluate.pred": list(preds) or None, "evaluate.mask": mask_source,
@@ -141,8 +142,9 @@ def evaluate(scene, preds, only_valid, mask_source, protocol, resolution, plot, 
             if ev.plot:
                 arrays = result["arrays"]
                 for pred in ev.pred:
-                    image = core.error_map_image(arrays[pred], arrays["gt"], arrays["mask"],
-                                                 max_error=ev.plot_max_error)
+                    image = error_map_figure(
+                        core.error_map_image(arrays[pred], arrays["gt"], arrays["mask"],
+                                             max_error=ev.plot_max_error), ev.plot_max_error)
                     write_png(source.out / "eval_plots" / Path(pred).name / f"{frame_id}.png",
                               image)
         except Exception as exc:
