@@ -39,8 +39,13 @@ def repair_depth(scene, npy, ply, preview, batch, out, frames, fmt):
 
     def work(frame):
         source, fid = frame.scene, frame.frame_id
-        messages = pipeline.ensure_upstream(frame)
+        import time
+
+        timings: dict[str, float] = {}
+        messages = pipeline.ensure_upstream(frame, timings)
+        start = time.perf_counter()
         depth, ids = pipeline.repaired_depth(frame)
+        timings["repair"] = time.perf_counter() - start
         scale = frame.camera.depth_scale
         write_depth(source.output_path("repaired", fid, depth_suffix(source, fid)), depth, scale)
         if npy:
@@ -51,7 +56,7 @@ def repair_depth(scene, npy, ply, preview, batch, out, frames, fmt):
         if preview:
             write_png(source.output_path("repaired", fid, "_preview.png"),
                       previews.preview_image(frame.rgb, frame.depth_m, depth, ids))
-        return messages
+        return messages, timings
 
     def outputs(source, fid):
         paths = [source.output_path("repaired", fid, depth_suffix(source, fid))]

@@ -5,13 +5,19 @@ writes only its own files); results come back in order of completion. ``--shard 
 frames whose key hashes to i (stable across runs and machines, so N cluster jobs split a dataset
 without talking to each other); ``--skip-existing`` leaves frames whose outputs all exist (every
 file is written atomically, so an existing file is a whole one).
+
+Each frame's run is recorded in ``log/<frame>.json`` under the scene's output folder:
+``{"commands": {name: {"status": "done" | "failed", "seconds": s, "stages": {stage: s},
+"error": message}}}`` (read by ``sr3d report``; timings differ from run to run).
 """
 
 from __future__ import annotations
 
 import functools
 import logging
+import json
 import multiprocessing
+import time
 import traceback
 import zlib
 from pathlib import Path
@@ -32,14 +38,42 @@ _JOB: dict = {}  # the forked workers inherit the work function and the frame li
 
 
 def _run_one(index: int):
+    """(index, messages, stage seconds, error, seconds) of one frame. ``work`` returns messages
+    or (messages, {stage: seconds})."""
     source, frame_id = _JOB["pairs"][index]
+    start = time.perf_counter()
     try:
-        return index, _JOB["work"](source.load_frame(frame_id)), None
+        result = _JOB["work"](source.load_frame(frame_id))
     except Exception as exc:  # sent back to the parent, reported there
+        seconds = time.perf_counter() - start
         if isinstance(exc, Sr3dError):
-            return index, None, exc
-        return index, None, RuntimeError(f"{type(exc).__name__}: {exc}\n"
-                                         f"{traceback.format_exc()}")
+            return index, None, {}, exc, seconds
+        return index, None, {}, RuntimeError(f"{type(exc).__name__}: {exc}\n"
+                                             f"{traceback.format_exc()}"), seconds
+    messages, stages = result if isinstance(result, tuple) else (result, {})
+    return index, messages, stages, None, time.perf_counter() - start
+
+
+def record_run(source: SceneSource, frame_id: str, command: str, seconds: float,
+               stages: dict[str, float], error: str | None = None) -> None:
+    """Merge this command's outcome into the frame's ``log/<frame>.json``; a log that cannot
+    be written only costs a warning."""
+    from sr3d_cli.io.atomic import write_json
+
+    path = source.output_path("log", frame_id, ".json")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
+    except (OSError, ValueError):
+        doc = {}
+    entry = {"status": "failed" if error else "done", "seconds": round(seconds, 4),
+             "stages": {k: round(v, 4) for k, v in stages.items()}}
+    if error:
+        entry["error"] = error
+    doc.setdefault("commands", {})[command] = entry
+    try:
+        write_json(path, doc)
+    except OSError as exc:
+        log.warning("warning: %s: cannot write the run log (%s)", path, exc.strerror or exc)
 
 
 def parse_shard(spec: str | None) -> tuple[int, int] | None:
@@ -60,11 +94,13 @@ def in_shard(key: str, shard: tuple[int, int] | None) -> bool:
 
 
 def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str | None,
-               work: Callable[[Frame], list[str]], *, batch: dict | None = None,
+               work: Callable[[Frame], list[str] | tuple[list[str], dict]], *,
+               batch: dict | None = None,
                outputs: Callable[[SceneSource, str], list[Path]] | None = None,
                after: Callable[[list[SceneSource]], None] | None = None) -> None:
     """Load each selected frame and call ``work(frame)``, which returns object-level messages
-    (printed as warnings). Exceptions fail that frame only. ``batch``: the values of
+    (printed as warnings), or (messages, {stage: seconds}). Exceptions fail that frame only;
+    each frame's outcome and time go to its run log (:func:`record_run`). ``batch``: the values of
     :func:`batch_options` (workers, shard, skip_existing); ``outputs(scene, frame_id)``: the files
     that mark a frame done; ``after(scenes)`` runs once the frames are done. Exits with the
     report's code."""
@@ -92,13 +128,15 @@ def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str 
     else:
         pool, results = None, map(_run_one, range(len(pairs)))
     try:
-        for index, messages, error in results:
+        for index, messages, stages, error, seconds in results:
             source, frame_id = pairs[index]
             key = source.frame_key(frame_id)
             bar.update()
             if error is not None:
                 report.fail(key, error)
+                record_run(source, frame_id, name, seconds, stages, report.failures[-1])
                 continue
+            record_run(source, frame_id, name, seconds, stages)
             for message in messages:
                 log.warning("warning: %s %s", key, message)
             report.ok()
