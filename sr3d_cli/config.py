@@ -29,6 +29,11 @@ class IOConfig:
 
 
 @dataclass
+class OnnxConfig:
+    providers: list[str] = field(default_factory=list)  # [] = CUDA where available, else CPU
+
+
+@dataclass
 class RenderConfig:
     backend: str = "auto"
 
@@ -195,6 +200,7 @@ class EvaluateConfig:
 class Config:
     io: IOConfig = field(default_factory=IOConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
+    onnx: OnnxConfig = field(default_factory=OnnxConfig)
     plane: PlaneConfig = field(default_factory=PlaneConfig)
     segment: SegmentConfig = field(default_factory=SegmentConfig)
     reconstruct: ReconstructConfig = field(default_factory=ReconstructConfig)

@@ -135,7 +135,8 @@ def parse_resolution(text: str) -> tuple[int, int] | None:
         return None
     w, sep, h = text.lower().partition("x")
     if not sep or not w.isdigit() or not h.isdigit() or int(w) < 1 or int(h) < 1:
-        raise ValueError(f"resolution must be WIDTHxHEIGHT (e.g. 320x240) or native, got {text!r}")
+        raise ValueError(f"resolution must be WIDTHxHEIGHT (e.g. 320x240) or native, "
+                         f"got {text!r}")
     return int(w), int(h)
 
 
