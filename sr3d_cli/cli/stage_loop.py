@@ -76,9 +76,51 @@ def record_run(source: SceneSource, frame_id: str, command: str, seconds: float,
         log.warning("warning: %s: cannot write the run log (%s)", path, exc.strerror or exc)
 
 
-def parse_shard(spec: str | None) -> tuple[int, int] | None:
+def shard_from_env(env: dict[str, str]) -> tuple[tuple[int, int], str] | None:
+    """(index, count) and where it came from: a Slurm job array (``SLURM_ARRAY_TASK_ID``,
+    ``_MIN``, ``_STEP``, ``_COUNT`` or ``_MAX``: task ids need not start at 0) or a Kubernetes
+    indexed Job (``JOB_COMPLETION_INDEX``, with ``SR3D_SHARD_COUNT`` set to the Job's
+    completions, which Kubernetes does not pass to the pod). None when neither is there."""
+    def number(key: str) -> int | None:
+        try:
+            return int(env[key])
+        except (KeyError, ValueError):
+            return None
+
+    task = number("SLURM_ARRAY_TASK_ID")
+    if task is not None:
+        first = number("SLURM_ARRAY_TASK_MIN") or 0
+        step = number("SLURM_ARRAY_TASK_STEP") or 1
+        count = number("SLURM_ARRAY_TASK_COUNT")
+        if count is None and number("SLURM_ARRAY_TASK_MAX") is not None:
+            count = (number("SLURM_ARRAY_TASK_MAX") - first) // step + 1
+        if count is not None:
+            return ((task - first) // step, count), "Slurm array"
+    index = number("JOB_COMPLETION_INDEX")
+    if index is not None and number("SR3D_SHARD_COUNT") is not None:
+        return (index, number("SR3D_SHARD_COUNT")), "Kubernetes indexed Job"
+    return None
+
+
+def parse_shard(spec: str | None, env: dict[str, str] | None = None) -> tuple[int, int] | None:
+    """``I/N`` -> (I, N); ``auto`` -> from the environment (:func:`shard_from_env`)."""
     if not spec:
         return None
+    if spec == "auto":
+        import os
+
+        found = shard_from_env(dict(os.environ) if env is None else env)
+        if found is None:
+            raise click.BadParameter(
+                "auto: no Slurm array (SLURM_ARRAY_TASK_ID with SLURM_ARRAY_TASK_COUNT) or "
+                "Kubernetes indexed Job (JOB_COMPLETION_INDEX with SR3D_SHARD_COUNT) in the "
+                "environment", param_hint="--shard")
+        (i, n), where = found
+        if not (n >= 1 and 0 <= i < n):
+            raise click.BadParameter(f"auto: {where} gives shard {i} of {n}",
+                                     param_hint="--shard")
+        log.info("--shard auto: shard %d of %d (%s)", i, n, where)
+        return i, n
     try:
         i, n = (int(x) for x in spec.split("/"))
     except ValueError:
@@ -155,9 +197,10 @@ def batch_options(func):
 
     @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
                   help="Frames processed in parallel (processes).")
-    @click.option("--shard", metavar="I/N",
-                  help="Only the frames of shard I of N (0-based; stable split, e.g. a Slurm "
-                       "array or Kubernetes indexed job: --shard $IDX/$COUNT).")
+    @click.option("--shard", metavar="I/N|auto",
+                  help="Only the frames of shard I of N (0-based; a stable split). auto: from "
+                       "a Slurm job array or a Kubernetes indexed Job (README: \"Running on a "
+                       "cluster\").")
     @click.option("--skip-existing", is_flag=True,
                   help="Leave frames whose outputs exist (resume an interrupted run).")
     @functools.wraps(func)
