@@ -168,30 +168,45 @@ def point_cloud_ply(depth_m: np.ndarray, rgb: np.ndarray, K: np.ndarray) -> byte
     return trimesh.PointCloud(pts, colors=colours).export(file_type="ply", encoding="binary")
 
 
+def gripper_points(grasps, i: int, gripper) -> np.ndarray:
+    """The drawn gripper of grasp ``i``: ``(6, 3)`` float camera-frame points, metres: finger
+    tip, finger base, finger base, finger tip (a polyline: the two fingers open to the grasp
+    width and the bar joining their bases), then the stem from the bar towards the palm."""
+    w, d, L = grasps.widths[i], grasps.depths[i], gripper.finger_length
+    local = np.array([[d, -w / 2, 0], [d - L, -w / 2, 0], [d - L, w / 2, 0], [d, w / 2, 0],
+                      [d - L, 0, 0], [d - L - gripper.palm_depth / 2, 0, 0]])
+    return local @ grasps.R[i].T + grasps.t[i]
+
+
+def best_per_object(grasps, per_object: int) -> list[int]:
+    """Indices into ``grasps`` (sorted best first) of the ``per_object`` best of each object."""
+    seen: dict[int, int] = {}
+    keep = []
+    for i, k in enumerate(int(x) for x in grasps.object_ids):
+        if seen.get(k, 0) < per_object:
+            keep.append(i)
+        seen[k] = seen.get(k, 0) + 1
+    return keep
+
+
 def grasp_preview(rgb: np.ndarray, grasps, K: np.ndarray, gripper, per_object: int = 3
                   ) -> np.ndarray:
     """The best ``per_object`` grasps of each object drawn over the RGB image as the gripper
-    seen from the camera: the two fingers (open to the grasp width), the bar joining their bases
-    and a stem towards the palm; coloured by score (colour bar below: red 0 ... green 1), the
-    best grasp of each object thicker. Returns ``(H + key, W, 3) uint8``."""
+    seen from the camera (:func:`gripper_points`), coloured by score (colour bar below: red 0
+    ... green 1), the best grasp of each object thicker. Returns ``(H + key, W, 3) uint8``."""
     from sr3d_cli.geometry.camera import project
 
     out = np.ascontiguousarray(rgb.copy())
     g = grasps.sorted()
-    for i in range(len(g) - 1, -1, -1):  # worst first, so the best are drawn on top
-        k = int(g.object_ids[i])
-        rank = sum(1 for j in range(i) if int(g.object_ids[j]) == k)
-        if rank >= per_object:
-            continue
-        w, d, L = g.widths[i], g.depths[i], gripper.finger_length
-        local = np.array([[d, -w / 2, 0], [d - L, -w / 2, 0], [d - L, w / 2, 0], [d, w / 2, 0],
-                          [d - L, 0, 0], [d - L - gripper.palm_depth / 2, 0, 0]])
-        pts = local @ g.R[i].T + g.t[i]
+    keep = best_per_object(g, per_object)
+    firsts = {int(g.object_ids[i]): i for i in reversed(keep)}
+    for i in reversed(keep):  # worst first, so the best are drawn on top
+        pts = gripper_points(g, i, gripper)
         if (pts[:, 2] <= 0).any():
             continue
         uv = np.round(project(pts, K)).astype(np.int32)
         colour = tuple(int(c) for c in score_colours(float(g.scores[i])))
-        thick = 2 if rank == 0 else 1
+        thick = 2 if firsts[int(g.object_ids[i])] == i else 1
         cv2.polylines(out, [uv[:4].reshape(-1, 1, 2)], False, colour, thick, cv2.LINE_AA)
         cv2.line(out, tuple(map(int, uv[4])), tuple(map(int, uv[5])), colour, thick, cv2.LINE_AA)
     width = out.shape[1]
