@@ -98,6 +98,8 @@ def gather(groups: list[tuple[str, list[SceneSource], Path]]) -> BatchReport:
                         if path.is_file():
                             entry.pictures.append((f"error map: {folder.name}", path))
                 frames.append(entry)
+    if "repaired" in preds:  # the tool's own output leads the table and the ranking
+        preds.insert(0, preds.pop(preds.index("repaired")))
     frames.sort(key=lambda f: _badness(f, preds[0] if preds else None), reverse=True)
     return BatchReport(frames, preds, means, protocol, failures)
 

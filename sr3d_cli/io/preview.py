@@ -50,7 +50,7 @@ def colour_depth(depth_m: np.ndarray, lo: float, hi: float) -> np.ndarray:
 
 def _font(width: int) -> tuple[float, int, int]:
     """Font scale, thickness and line height for a key ``width`` pixels wide."""
-    scale = float(np.clip(width / 1400, 0.3, 0.8))
+    scale = float(np.clip(width / 1500, 0.3, 1.3))
     thick = 1 if scale < 0.6 else 2
     (_, h), base = cv2.getTextSize("Ag", cv2.FONT_HERSHEY_SIMPLEX, scale, thick)
     return scale, thick, h + base + 4
