@@ -64,7 +64,7 @@ def resolve_providers(names: Sequence[str], available: Sequence[str]) -> list[st
 
 
 class OnnxModel:
-    """An onnxruntime session whose tensors were checked, on the configured providers.
+    """An onnxruntime model whose tensors were checked, run on the configured providers.
 
     inputs / outputs : {name: shape}; a name of ``"*"`` means "the only tensor, whatever its name"
     (encoders are exported with many different input names). ``providers``: this model's

@@ -53,11 +53,11 @@ def test_models_load_on_the_configured_providers_and_say_so(tmp_path, sr3d_log, 
     asked = []
     real = ort.InferenceSession
 
-    def session(*args, providers=None, **kwargs):
+    def recording(*args, providers=None, **kwargs):
         asked.append(providers)
         return real(*args, providers=[CPU], **kwargs)
 
-    monkeypatch.setattr(ort, "InferenceSession", session)
+    monkeypatch.setattr(ort, "InferenceSession", recording)
     monkeypatch.setattr(ort, "get_available_providers", lambda: [CUDA, CPU])
     OnnxModel(path, "SAM encoder", {"*": None}, {"*": None})
     assert asked[-1] == [CUDA, CPU]  # automatic: CUDA first where onnxruntime has it
@@ -72,7 +72,7 @@ def test_models_load_on_the_configured_providers_and_say_so(tmp_path, sr3d_log, 
     assert asked[-1] == [CPU]
 
 
-def test_a_session_is_made_on_the_default_providers(tmp_path):
+def test_a_model_is_made_on_the_default_providers(tmp_path):
     path = onnx_builders.density_sphere(tmp_path / "grid.onnx")
     model = OnnxModel(path, "reconstruction", {"*": None}, {"*": None})
     expected = CUDA if CUDA in ort.get_available_providers() else CPU
