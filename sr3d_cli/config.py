@@ -30,6 +30,11 @@ class IOConfig:
 
 
 @dataclass
+class OnnxConfig:
+    providers: list[str] = field(default_factory=list)  # [] = CUDA where available, else CPU
+
+
+@dataclass
 class RenderConfig:
     backend: str = "auto"
 
@@ -190,12 +195,15 @@ class EvaluateConfig:
     mask: str = "auto"
     plot: bool = False
     plot_max_error: float = 0.05
+    protocol: str = "native"
+    resolution: str = ""
 
 
 @dataclass
 class Config:
     io: IOConfig = field(default_factory=IOConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
+    onnx: OnnxConfig = field(default_factory=OnnxConfig)
     plane: PlaneConfig = field(default_factory=PlaneConfig)
     segment: SegmentConfig = field(default_factory=SegmentConfig)
     reconstruct: ReconstructConfig = field(default_factory=ReconstructConfig)
@@ -216,6 +224,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "grasp.source": ("repaired", "raw"),
     "evaluate.holes": ("full", "ignore"),
     "evaluate.mask": ("auto", "gt", "pred"),
+    "evaluate.protocol": ("native", "transcg", "cleargrasp"),
 }
 
 

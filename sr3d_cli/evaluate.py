@@ -1,5 +1,5 @@
 """Depth metrics over transparent-object pixels, as ClearGrasp (Sajjan et al., ICRA 2020) and
-TransCG (Fang et al., RA-L 2022) report them.
+TransCG (Fang et al., RA-L 2022) report them, under one of three protocols (:data:`PROTOCOLS`).
 
 Counted pixels: inside the object mask and where the ground truth is valid (finite, > 0).
 Holes in the prediction (0 / NaN) either count with full error, the prediction taken as 0 as
@@ -10,6 +10,7 @@ share of counted pixels where the prediction is valid, so both readings can be r
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,12 +60,13 @@ def depth_metrics(pred_m: np.ndarray, gt_m: np.ndarray, mask: np.ndarray, *,
     g = gt[sel]
     out: dict[str, float] = {"pixels": int(sel.sum()), "coverage": coverage}
     if g.size == 0:
-        out.update({k: math.nan for k in METRICS})
+        out.update({k: math.nan for k in METRICS + ("rel_median",)})
         return out
     err = p - g
     out["rmse"] = float(np.sqrt(np.mean(err ** 2)))
     out["mae"] = float(np.mean(np.abs(err)))
     out["rel"] = float(np.mean(np.abs(err) / g))
+    out["rel_median"] = float(np.median(np.abs(err) / g))
     with np.errstate(divide="ignore"):
         ratio = np.maximum(np.where(p > 0, p / g, np.inf), np.where(p > 0, g / p, np.inf))
     for name, thr in DELTAS.items():
@@ -76,11 +78,93 @@ def mean_metrics(rows: list[dict[str, float]]) -> dict[str, float]:
     """Average of per-frame metrics over the frames that counted any pixel (``frames``: how many)."""
     used = [r for r in rows if r.get("pixels", 0) > 0]
     out: dict[str, float] = {"frames": len(used)}
-    for key in METRICS + ("coverage",):
-        values = [r[key] for r in used if not math.isnan(r[key])]
+    for key in METRICS + ("rel_median", "coverage"):
+        values = [r[key] for r in used if key in r and not math.isnan(r[key])]
         out[key] = float(np.mean(values)) if values else math.nan
     out["pixels"] = int(sum(r["pixels"] for r in used))
     return out
+
+@dataclass(frozen=True)
+class Protocol:
+    """How a published table counts: resolution, depth range, pixel sets, hole handling.
+
+    resolution : (width, height) every image is resized to (nearest neighbour) before
+        counting, or None for the frames' own size.
+    depth_range : (near, far) metres; readings outside it, in the prediction and the ground
+        truth, are set to 0 before counting (None: no range).
+    pixel_sets : "object" (mask and valid ground truth) and/or "all" (valid ground truth).
+    """
+
+    name: str
+    resolution: tuple[int, int] | None
+    depth_range: tuple[float, float] | None
+    pixel_sets: tuple[str, ...]
+    holes: str | None  # None: the configured holes mode
+    note: str
+
+    def describe(self, holes: str) -> dict:
+        return {"name": self.name,
+                "resolution": ("native" if self.resolution is None
+                               else f"{self.resolution[0]}x{self.resolution[1]} (nearest)"),
+                "depth_range_m": list(self.depth_range) if self.depth_range else None,
+                "pixel_sets": {s: PIXEL_SETS[s] for s in self.pixel_sets},
+                "holes": HOLES_NOTE[self.holes or holes], "note": self.note}
+
+
+PIXEL_SETS = {"object": "inside the object mask where the ground truth is valid",
+              "all": "every pixel where the ground truth is valid"}
+PROTOCOLS = {
+    "native": Protocol("native", None, None, ("object",), None,
+                       "per-frame metrics at the frames' size, averaged over frames"),
+    # Fang et al., TransCG (RA-L 2022), utils/metrics.py: per-image sums over the pixel set,
+    # divided per image, averaged over images; depth outside 0.3-1.5 m is 0 in both images
+    "transcg": Protocol("transcg", None, (0.3, 1.5), ("object", "all"), "full",
+                        "TransCG: per-image means over object pixels and over all pixels, "
+                        "depth 0.3-1.5 m, averaged over images (usually at 320x240)"),
+    # Sajjan et al., ClearGrasp (ICRA 2020), eval_depth_completion.py: metrics at the
+    # depth2depth output size 256x144, over mask and valid ground truth, averaged over images
+    "cleargrasp": Protocol("cleargrasp", (256, 144), None, ("object",), "full",
+                           "ClearGrasp: metrics at 256x144 over object pixels, averaged over "
+                           "images; rel_median: median relative error"),
+}
+
+
+def parse_resolution(text: str) -> tuple[int, int] | None:
+    """``"320x240"`` -> (320, 240); ``"native"`` or ``""`` -> None; ValueError otherwise."""
+    if text in ("", "native"):
+        return None
+    w, sep, h = text.lower().partition("x")
+    if not sep or not w.isdigit() or not h.isdigit() or int(w) < 1 or int(h) < 1:
+        raise ValueError(f"resolution must be WIDTHxHEIGHT (e.g. 320x240) or native, "
+                         f"got {text!r}")
+    return int(w), int(h)
+
+
+def protocol_metrics(pred_m: np.ndarray, gt_m: np.ndarray, mask: np.ndarray,
+                     protocol: Protocol, *, holes: str = "full",
+                     resolution: tuple[int, int] | None = None) -> dict[str, dict[str, float]]:
+    """Metrics of one frame under ``protocol``: ``{pixel set: depth_metrics(...)}``.
+
+    pred_m, gt_m : (H, W) float metres (0 / non-finite = no value); mask : (H, W), non-zero =
+    object. ``resolution`` (width, height) overrides the protocol's.
+    """
+    import cv2
+
+    size = resolution or protocol.resolution
+    pred = np.nan_to_num(np.asarray(pred_m, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    gt = np.nan_to_num(np.asarray(gt_m, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    obj = (np.asarray(mask) != 0).astype(np.uint8)
+    if size is not None and size != (gt.shape[1], gt.shape[0]):
+        pred, gt, obj = (cv2.resize(a, size, interpolation=cv2.INTER_NEAREST)
+                         for a in (pred, gt, obj))
+    if protocol.depth_range is not None:
+        near, far = protocol.depth_range
+        pred = np.where((pred >= near) & (pred <= far), pred, 0.0)
+        gt = np.where((gt >= near) & (gt <= far), gt, 0.0)
+    sets = {"object": obj, "all": np.ones_like(obj)}
+    mode = protocol.holes or holes
+    return {name: depth_metrics(pred, gt, sets[name], holes=mode)
+            for name in protocol.pixel_sets}
 
 
 def error_map_image(pred_m: np.ndarray, gt_m: np.ndarray, mask: np.ndarray, *,
@@ -129,12 +213,15 @@ def evaluation_mask(source, frame_id: str, shape: tuple[int, int], which: str
 
 
 def evaluate_frame(source, frame_id: str, preds: list[str], *, holes: str = "full",
-                   mask_source: str = "auto") -> dict:
+                   mask_source: str = "auto", protocol: Protocol | None = None,
+                   resolution: tuple[int, int] | None = None) -> dict:
     """Metrics of each prediction folder for one frame.
 
-    Returns ``{"mask": path, "preds": {pred: metrics}, "arrays": {...}}``; ``arrays`` holds
-    gt, mask and the predictions (metres) for plotting.
+    Returns ``{"mask": path, "preds": {name: metrics}, "arrays": {...}}``; ``arrays`` holds
+    gt, mask and the predictions (metres) for plotting. Under a protocol with several pixel
+    sets, the first set keeps the prediction's name and the others are ``"<pred>:<set>"``.
     """
+    protocol = protocol or PROTOCOLS["native"]
     gt_path = source.gt_depth_path(frame_id)
     if gt_path is None:
         raise InputError(source.frame_key(frame_id), "no ground-truth depth (gt/depth/)")
@@ -147,9 +234,18 @@ def evaluate_frame(source, frame_id: str, preds: list[str], *, holes: str = "ful
             raise InputError(source.frame_key(frame_id),
                              f"no prediction '{pred}' (looked in {source.out / pred})")
         depth = source.read_depth_checked(path, gt.shape)
-        result["preds"][pred] = depth_metrics(depth, gt, mask > 0, holes=holes)
+        per_set = protocol_metrics(depth, gt, mask, protocol, holes=holes,
+                                   resolution=resolution)
+        for i, (name, metrics) in enumerate(per_set.items()):
+            result["preds"][pred if i == 0 else f"{pred}:{name}"] = metrics
         result["arrays"][pred] = depth
     return result
+
+
+def result_names(preds: list[str], protocol: Protocol) -> list[str]:
+    """The row names :func:`evaluate_frame` gives its results, in order."""
+    return [p if i == 0 else f"{p}:{name}" for p in preds
+            for i, name in enumerate(protocol.pixel_sets)]
 
 
 def instance_ious(pred_ids: np.ndarray, gt_ids: np.ndarray) -> dict[int, float]:

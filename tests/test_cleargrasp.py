@@ -103,3 +103,77 @@ def test_real_frames_reproduce_the_published_raw_depth_figures(realdata, tmp_pat
             assert m["pixels"] == published["pixels"]
         for name, value in zip(("rmse", "rel", "mae"), published[mode]):
             assert round(m[name], 4) == value, (key, name, m[name])
+
+
+# At the frames' own size, every protocol counts the object pixels the README's figures count.
+@pytest.mark.parametrize("protocol", ["native", "transcg", "cleargrasp"])
+def test_each_protocol_at_native_size_reproduces_the_published_figures(realdata, tmp_path,
+                                                                       protocol):
+    result = CliRunner().invoke(cli, ["evaluate", str(realdata), "--pred", "depth", "-q",
+                                      "--out", str(tmp_path), "--protocol", protocol,
+                                      "--resolution", "native"])
+    assert result.exit_code == 0, result.stderr
+    assert f"# protocol {protocol}: native" in result.stdout
+    document = json.loads((tmp_path / "metrics.json").read_text())
+    assert document["protocol"]["name"] == protocol
+    for key, published in PUBLISHED.items():
+        m = document["frames"][key]["depth"]
+        assert m["pixels"] == published["pixels"]
+        for name, value in zip(("rmse", "rel", "mae"), published["full"]):
+            assert round(m[name], 4) == value, (protocol, key, name, m[name])
+
+
+# Measured at each protocol's table resolution (nearest-neighbour resize of every image)
+AT_TABLE_SIZE = {
+    ("transcg", "320x240"): {
+        "d435/000000123": {"depth": (2065, 0.3166, 0.2430, 0.1617),
+                           "depth:all": (61613, 0.1785, 0.0829, 0.0508)},
+        "d415/000000000": {"depth": (449, 0.2807, 0.1582, 0.1252),
+                           "depth:all": (71942, 0.0826, 0.0091, 0.0090)}},
+    ("cleargrasp", None): {
+        "d435/000000123": {"depth": (996, 0.3209, 0.2465, 0.1649)},
+        "d415/000000000": {"depth": (219, 0.2760, 0.1537, 0.1216)}},
+}
+
+
+@pytest.mark.parametrize("protocol, size", list(AT_TABLE_SIZE))
+def test_protocols_at_their_table_size(realdata, tmp_path, protocol, size):
+    args = ["--resolution", size] if size else []
+    result = CliRunner().invoke(cli, ["evaluate", str(realdata), "--pred", "depth", "-q",
+                                      "--out", str(tmp_path), "--protocol", protocol, *args])
+    assert result.exit_code == 0, result.stderr
+    document = json.loads((tmp_path / "metrics.json").read_text())
+    expected_size = size or "256x144"
+    assert document["protocol"]["resolution"] == f"{expected_size} (nearest)"
+    assert f"# protocol {protocol}: {expected_size} (nearest)" in result.stdout
+    for key, rows in AT_TABLE_SIZE[(protocol, size)].items():
+        assert sorted(document["frames"][key]) == sorted(rows)
+        for name, (pixels, rmse, rel, mae) in rows.items():
+            m = document["frames"][key][name]
+            assert m["pixels"] == pixels
+            assert (round(m["rmse"], 4), round(m["rel"], 4), round(m["mae"], 4)) == \
+                (rmse, rel, mae), (key, name)
+    if protocol == "cleargrasp":
+        assert "REL med" in result.stdout
+        assert round(document["frames"]["d435/000000123"]["depth"]["rel_median"], 4) == 0.0265
+
+
+def test_protocol_rows_and_bad_protocol_options_on_the_fixture(tmp_path):
+    folder = make_cleargrasp(tmp_path / "cg")
+
+    def run(*args):
+        return CliRunner().invoke(cli, ["evaluate", str(folder), "--pred", "depth", "-q",
+                                        "--out", str(tmp_path / "out"), *args])
+
+    result = run("--protocol", "transcg")
+    assert result.exit_code == 0, result.stderr
+    means = json.loads((tmp_path / "out" / "metrics.json").read_text())["means"]
+    assert sorted(means) == ["depth", "depth:all"]
+    # all pixels: 36 x 64 minus the ground truth's one NaN; the 35 object holes are the error
+    assert means["depth:all"]["pixels"] == 36 * 64 - 1
+    assert means["depth:all"]["mae"] == pytest.approx((35 * 0.55 + 100 * 0.05) / (36 * 64 - 1),
+                                                      rel=1e-4)
+    assert "depth:all" in result.stdout and "depth 0.3-1.5 m" in result.stdout
+    assert run("--protocol", "transcg", "--only-valid").exit_code == 2
+    bad = run("--resolution", "320by240")
+    assert bad.exit_code == 2 and "WIDTHxHEIGHT" in bad.stderr

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import click
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -135,6 +136,47 @@ def test_shard_splits_frames_stably_and_completely(tmp_path, native_scene):
     assert outs[0].isdisjoint(outs[1]) and len(outs[0] | outs[1]) == 2
     bad = runner.invoke(cli, ["segment", str(native_scene), "--shard", "2/2"])
     assert bad.exit_code == 2 and "--shard" in bad.output
+
+
+def test_shard_auto_reads_slurm_and_kubernetes():
+    from sr3d_cli.cli.stage_loop import parse_shard
+
+    # sbatch --array=0-9: ids 0..9
+    assert parse_shard("auto", {"SLURM_ARRAY_TASK_ID": "3", "SLURM_ARRAY_TASK_MIN": "0",
+                                "SLURM_ARRAY_TASK_COUNT": "10"}) == (3, 10)
+    # --array=1-10 (ids from 1) and --array=0-18:2 (a step; older Slurm: no _COUNT)
+    assert parse_shard("auto", {"SLURM_ARRAY_TASK_ID": "1", "SLURM_ARRAY_TASK_MIN": "1",
+                                "SLURM_ARRAY_TASK_COUNT": "10"}) == (0, 10)
+    assert parse_shard("auto", {"SLURM_ARRAY_TASK_ID": "18", "SLURM_ARRAY_TASK_MIN": "0",
+                                "SLURM_ARRAY_TASK_STEP": "2",
+                                "SLURM_ARRAY_TASK_MAX": "18"}) == (9, 10)
+    assert parse_shard("auto", {"JOB_COMPLETION_INDEX": "4", "SR3D_SHARD_COUNT": "5"}) == (4, 5)
+    for env in ({}, {"JOB_COMPLETION_INDEX": "4"}, {"SLURM_ARRAY_TASK_ID": "2"}):
+        with pytest.raises(click.BadParameter, match="SLURM_ARRAY_TASK_ID"):
+            parse_shard("auto", env)
+    with pytest.raises(click.BadParameter, match="shard 5 of 5"):
+        parse_shard("auto", {"JOB_COMPLETION_INDEX": "5", "SR3D_SHARD_COUNT": "5"})
+
+
+def test_shard_auto_splits_a_batch_like_explicit_shards(tmp_path, native_scene, monkeypatch):
+    runner = CliRunner()
+    outs = []
+    for i in range(2):
+        monkeypatch.setenv("JOB_COMPLETION_INDEX", str(i))
+        monkeypatch.setenv("SR3D_SHARD_COUNT", "2")
+        out = tmp_path / f"auto{i}"
+        result = runner.invoke(cli, ["segment", str(native_scene), "--out", str(out), "-q",
+                                     "--shard", "auto"])
+        assert result.exit_code == 0, result.output
+        explicit = tmp_path / f"explicit{i}"
+        assert runner.invoke(cli, ["segment", str(native_scene), "--out", str(explicit), "-q",
+                                   "--shard", f"{i}/2"]).exit_code == 0
+        outs.append(sorted(p.name for p in out.rglob("*.png")))
+        assert outs[-1] == sorted(p.name for p in explicit.rglob("*.png"))
+    assert len(outs[0]) + len(outs[1]) > 0 and not set(outs[0]) & set(outs[1])
+    monkeypatch.delenv("JOB_COMPLETION_INDEX")
+    bad = runner.invoke(cli, ["segment", str(native_scene), "--shard", "auto"])
+    assert bad.exit_code == 2 and "JOB_COMPLETION_INDEX" in bad.output
 
 
 def test_align_bop_writes_scene_gt(synth_set, tmp_path):

@@ -73,3 +73,62 @@ def test_error_map_colours_holes_and_background():
     assert tuple(img[0, 0]) == (255, 0, 255)
     assert tuple(img[3, 3]) == (40, 40, 40)
     assert img[1, 1, 0] > 100 and img[0, 1, 2] > 100  # large error red, zero error blue
+
+
+def _transcg_reference(pred, gt, mask, near=0.3, far=1.5):
+    """TransCG's utils/metrics.py written out for one image: process_depth zeroes readings
+    outside [near, far] in both images; zero_mask = gt > 0; masked sums over mask & zero_mask."""
+    pred = np.where((pred < near) | (pred > far), 0, pred)
+    gt = np.where((gt < near) | (gt > far), 0, gt)
+    out = {}
+    for name, sel in (("object", (mask > 0) & (gt > 0)), ("all", gt > 0)):
+        n = sel.sum()
+        err = (pred - gt) * sel
+        with np.errstate(divide="ignore", invalid="ignore"):
+            thres = np.maximum(pred / (gt + 1e-8), gt / pred)
+        out[name] = {"rmse": np.sqrt((err ** 2).sum() / n), "mae": np.abs(err).sum() / n,
+                     "rel": (np.abs(err) / (gt + 1e-8)).sum() / n,
+                     "delta_1.05": 100 * ((thres < 1.05) & sel).sum() / n}
+    return out
+
+
+def test_transcg_protocol_matches_the_reference_formulas():
+    from sr3d_cli.evaluate import PROTOCOLS, protocol_metrics
+
+    rng = np.random.default_rng(4)
+    gt = rng.uniform(0.2, 1.8, (12, 16))  # some of it outside 0.3-1.5 m
+    pred = gt + rng.normal(0, 0.03, gt.shape)
+    pred[rng.random(gt.shape) < 0.2] = 0  # holes
+    mask = np.zeros(gt.shape, np.uint8)
+    mask[3:9, 4:12] = 2
+    got = protocol_metrics(pred, gt, mask, PROTOCOLS["transcg"])
+    ref = _transcg_reference(pred.astype(np.float32), gt.astype(np.float32), mask)
+    assert set(got) == {"object", "all"}
+    for name in ("object", "all"):
+        for key, value in ref[name].items():
+            assert got[name][key] == pytest.approx(value, rel=1e-5), (name, key)
+    assert got["all"]["pixels"] == int(((gt >= 0.3) & (gt <= 1.5)).sum())
+
+
+def test_protocol_resolution_resizes_by_nearest_neighbour():
+    from sr3d_cli.evaluate import PROTOCOLS, parse_resolution, protocol_metrics
+
+    gt = np.full((4, 8), 1.0)
+    pred = gt.copy()
+    pred[:, ::2] = 1.1  # every other column off by 0.1 m
+    mask = np.ones((4, 8))
+    native = protocol_metrics(pred, gt, mask, PROTOCOLS["native"])["object"]
+    half = protocol_metrics(pred, gt, mask, PROTOCOLS["native"], resolution=(4, 2))["object"]
+    assert native["pixels"] == 32 and native["mae"] == pytest.approx(0.05)
+    assert half["pixels"] == 8 and half["mae"] == pytest.approx(0.1)  # nearest keeps even columns
+    assert PROTOCOLS["cleargrasp"].resolution == (256, 144)
+    assert parse_resolution("320x240") == (320, 240) and parse_resolution("native") is None
+    with pytest.raises(ValueError, match="WIDTHxHEIGHT"):
+        parse_resolution("320*240")
+
+
+def test_median_relative_error():
+    gt = np.full((1, 5), 1.0)
+    pred = np.array([[1.01, 1.02, 1.03, 1.5, 0.0]])
+    m = depth_metrics(pred, gt, np.ones((1, 5)))
+    assert m["rel_median"] == pytest.approx(0.03) and m["rel"] == pytest.approx(1.56 / 5)

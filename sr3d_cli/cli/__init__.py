@@ -8,6 +8,7 @@ from sr3d_cli import __version__
 from sr3d_cli.cli.align import align
 from sr3d_cli.cli.evaluate import evaluate
 from sr3d_cli.cli.grasp import grasp
+from sr3d_cli.cli.html_report import report
 from sr3d_cli.cli.import_bag import import_bag
 from sr3d_cli.cli.reconstruct import reconstruct
 from sr3d_cli.cli.repair_depth import repair_depth
@@ -48,6 +49,7 @@ cli.add_command(repair_depth)
 cli.add_command(grasp)
 cli.add_command(evaluate)
 cli.add_command(import_bag)
+cli.add_command(report)
 
 
 def main() -> None:

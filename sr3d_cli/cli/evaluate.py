@@ -29,12 +29,17 @@ def _fmt(key: str, value) -> str:
     return f"{value:.4f}"
 
 
-def format_table(means: dict[str, dict]) -> str:
+def format_table(means: dict[str, dict], median: bool = False) -> str:
+    """The mean table; ``median`` adds the median relative error column."""
+    columns, headers = list(COLUMNS), list(HEADERS)
+    if median:
+        columns.insert(5, "rel_median")
+        headers.insert(5, "REL med")
     width = max([4] + [len(p) for p in means])
-    lines = [f"{'pred':<{width}}  " + "  ".join(f"{h:>8}" for h in HEADERS)]
+    lines = [f"{'pred':<{width}}  " + "  ".join(f"{h:>8}" for h in headers)]
     for pred, row in means.items():
         lines.append(f"{pred:<{width}}  " + "  ".join(f"{_fmt(k, row.get(k)):>8}"
-                                                    for k in COLUMNS))
+                                                    for k in columns))
     return "\n".join(lines)
 
 
@@ -49,7 +54,8 @@ def _nan_to_none(obj):
 
 
 def _csv(frames: dict[str, dict], means: dict[str, dict]) -> str:
-    keys = ("pixels", "coverage", "rmse", "rel", "mae", "delta_1.05", "delta_1.10", "delta_1.25")
+    keys = ("pixels", "coverage", "rmse", "rel", "rel_median", "mae", "delta_1.05", "delta_1.10",
+            "delta_1.25")
 
     def row(name: str, pred: str, m: dict) -> str:
         cells = ("" if math.isnan(float(m[k])) else f"{m[k]:.6g}" for k in keys)
@@ -71,6 +77,14 @@ def _csv(frames: dict[str, dict], means: dict[str, dict]) -> str:
                    "with full error, as ClearGrasp).")
 @click.option("--mask", "mask_source", type=click.Choice(["auto", "gt", "pred"]), default=None,
               help="Pixels to score: gt masks, masks/ from segment, or auto (gt, else masks/).")
+@click.option("--protocol", type=click.Choice(["native", "transcg", "cleargrasp"]),
+              default=None,
+              help="How pixels are counted: native (default), transcg (per-image means over "
+                   "object and over all pixels, depth 0.3-1.5 m) or cleargrasp (256x144, "
+                   "median REL too). See the README.")
+@click.option("--resolution", metavar="WxH|native", default=None,
+              help="Resize every image (nearest) to WxH before counting, e.g. 320x240 for "
+                   "TransCG's tables (default: the protocol's).")
 @click.option("--plot", is_flag=True, default=None, help="Write per-frame error maps (PNG).")
 @click.option("--grasps", "grasps", is_flag=True,
               help="Score grasps/ instead of depth: jaws closed on the true meshes, force "
@@ -82,7 +96,8 @@ def _csv(frames: dict[str, dict], means: dict[str, dict]) -> str:
                    "(GraspNet-1Billion's). See the README.")
 @scene_options
 @common_options
-def evaluate(scene, preds, only_valid, mask_source, plot, grasps, contacts, out, frames, fmt):
+def evaluate(scene, preds, only_valid, mask_source, protocol, resolution, plot, grasps, contacts,
+             out, frames, fmt):
     """Score depth predictions against ground truth over the transparent objects.
 
     Writes metrics.json and metrics.csv (to --out, else SCENE) and prints the mean table.
@@ -94,13 +109,24 @@ def evaluate(scene, preds, only_valid, mask_source, plot, grasps, contacts, out,
         raise UsageExit("--contacts goes with --grasps")
     from sr3d_cli import evaluate as core
     from sr3d_cli.io.atomic import write_json, write_png, write_text
+    from sr3d_cli.io.preview import error_map_figure
 
     cfg = load_config({
         "evaluate.pred": list(preds) or None, "evaluate.mask": mask_source,
         "evaluate.plot": plot, "evaluate.holes": "ignore" if only_valid else None,
-        "io.format": fmt,
+        "evaluate.protocol": protocol, "evaluate.resolution": resolution, "io.format": fmt,
     })
     ev = cfg.evaluate
+    proto = core.PROTOCOLS[ev.protocol]
+    try:
+        size = core.parse_resolution(ev.resolution) if ev.resolution else proto.resolution
+    except ValueError as exc:
+        raise UsageExit(f"evaluate.resolution: {exc}") from None
+    if only_valid and proto.holes is not None:
+        raise UsageExit(f"--only-valid does not go with --protocol {proto.name} (it counts "
+                        "holes with full error)")
+    proto = core.Protocol(proto.name, size, proto.depth_range, proto.pixel_sets, proto.holes,
+                          proto.note)
     ctx = click.get_current_context()
     report = Report(verbose=ctx.meta["sr3d.verbose"])
     out_root = Path(out) if out else Path(scene)
@@ -113,12 +139,13 @@ def evaluate(scene, preds, only_valid, mask_source, plot, grasps, contacts, out,
         key = source.frame_key(frame_id)
         try:
             result = core.evaluate_frame(source, frame_id, ev.pred, holes=ev.holes,
-                                         mask_source=ev.mask)
+                                         mask_source=ev.mask, protocol=proto)
             if ev.plot:
                 arrays = result["arrays"]
                 for pred in ev.pred:
-                    image = core.error_map_image(arrays[pred], arrays["gt"], arrays["mask"],
-                                                 max_error=ev.plot_max_error)
+                    image = error_map_figure(
+                        core.error_map_image(arrays[pred], arrays["gt"], arrays["mask"],
+                                             max_error=ev.plot_max_error), ev.plot_max_error)
                     write_png(source.out / "eval_plots" / Path(pred).name / f"{frame_id}.png",
                               image)
         except Exception as exc:
@@ -126,13 +153,18 @@ def evaluate(scene, preds, only_valid, mask_source, plot, grasps, contacts, out,
             continue
         per_frame[key] = result["preds"]
         report.ok()
-    means = {pred: core.mean_metrics([f[pred] for f in per_frame.values()]) for pred in ev.pred}
+    names = core.result_names(list(ev.pred), proto)
+    means = {name: core.mean_metrics([f[name] for f in per_frame.values()]) for name in names}
     document = {
-        "holes": core.HOLES_NOTE[ev.holes],
+        "protocol": proto.describe(ev.holes),
+        "holes": core.HOLES_NOTE[proto.holes or ev.holes],
         "pixels": "inside the object mask (gt/masks, else masks/; ClearGrasp: the -mask.png "
-                  "components) where the ground truth is finite and > 0",
+                  "components) where the ground truth is finite and > 0"
+                  + ("; rows '<pred>:all': every pixel with valid ground truth"
+                     if "all" in proto.pixel_sets else ""),
         "mean": "per-frame metrics averaged over frames with counted pixels",
-        "units": {"rmse": "m", "mae": "m", "rel": "|pred - gt| / gt", "delta": "percent",
+        "units": {"rmse": "m", "mae": "m", "rel": "mean of |pred - gt| / gt",
+                  "rel_median": "median of |pred - gt| / gt", "delta": "percent",
                   "coverage": "share of counted pixels where the prediction is valid"},
         "predictions": list(ev.pred),
         "means": means,
@@ -145,8 +177,14 @@ def evaluate(scene, preds, only_valid, mask_source, plot, grasps, contacts, out,
     except OSError as exc:
         raise UsageExit(f"{out_root}: cannot write metrics ({exc.strerror or exc}); "
                         "use --out DIR") from None
-    click.echo(f"# {core.HOLES_NOTE[ev.holes]}")
-    click.echo(format_table(means))
+    described = proto.describe(ev.holes)
+    range_note = (f", depth {proto.depth_range[0]:g}-{proto.depth_range[1]:g} m"
+                  if proto.depth_range else "")
+    click.echo(f"# protocol {proto.name}: {described['resolution']}{range_note}; "
+               + "; ".join(f"{'rows <pred>:' + k if k != proto.pixel_sets[0] else 'pixels'}: {v}"
+                           for k, v in described["pixel_sets"].items()))
+    click.echo(f"# {core.HOLES_NOTE[proto.holes or ev.holes]}")
+    click.echo(format_table(means, median=proto.name == "cleargrasp"))
     report.finish("frames")
 
 

@@ -77,11 +77,19 @@ def scene_options(func):
 
 def load_config(flags: dict | None = None) -> Config:
     """Build the config from the current command's --config/--set plus explicit ``flags``."""
+    from sr3d_cli.onnx_model import resolve_providers, use_providers
+
     path, sets = click.get_current_context().meta.get("sr3d.config", (None, ()))
     try:
-        return build_config(path, sets, flags)
+        cfg = build_config(path, sets, flags)
+        if cfg.onnx.providers:  # asked for by name: checked before any frame
+            import onnxruntime as ort
+
+            resolve_providers(cfg.onnx.providers, ort.get_available_providers())
     except ConfigError as exc:
         raise UsageExit(str(exc)) from None
+    use_providers(cfg.onnx.providers)
+    return cfg
 
 
 def masks_option(func):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import click
 
 from sr3d_cli.cli.options import (UsageExit, check_masks, common_options, load_config,
@@ -55,10 +57,13 @@ def repair_depth(scene, npy, ply, preview, masks, redo, batch, out, frames, fmt)
 
     def work(frame):
         source, fid = frame.scene, frame.frame_id
-        messages = pipeline.ensure_upstream(frame, redo=redo,
+        timings: dict[str, float] = {}
+        messages = pipeline.ensure_upstream(frame, timings, redo=redo,
                                             keep_stale=batch.get("keep_stale", False))
         record = stage_record(cfg, source, fid, "repair")
+        start = time.perf_counter()
         depth, ids = pipeline.repaired_depth(frame)
+        timings["repair"] = time.perf_counter() - start
         scale = frame.camera.depth_scale
         write_depth(source.output_path("repaired", fid, depth_suffix(source, fid)), depth, scale)
         if npy:
@@ -76,7 +81,7 @@ def repair_depth(scene, npy, ply, preview, masks, redo, batch, out, frames, fmt)
         write_json(source.output_path("repaired", fid, ".json"), document)
         if "frame_failed" in document:
             raise FrameFailed(document["frame_failed"])
-        return messages
+        return messages, timings
 
     def outputs(source, fid):
         paths = [source.output_path("repaired", fid, depth_suffix(source, fid)),

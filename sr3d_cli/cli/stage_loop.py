@@ -7,14 +7,20 @@ without talking to each other); ``--skip-existing`` leaves frames whose outputs 
 file is written atomically, so an existing file is a whole one) and still match what they were
 made from (:mod:`sr3d_cli.io.provenance`); ``--keep-stale`` keeps those that do not, with a
 warning.
+
+Each frame's run is recorded in ``log/<frame>.json`` under the scene's output folder:
+``{"commands": {name: {"status": "done" | "failed", "seconds": s, "stages": {stage: s},
+"error": message}}}`` (read by ``sr3d report``; timings differ from run to run).
 """
 
 from __future__ import annotations
 
 import functools
 import logging
+import json
 import multiprocessing
 import signal
+import time
 import traceback
 import zlib
 from pathlib import Path
@@ -46,19 +52,87 @@ def _stop_worker(signum, frame):
 
 
 def _run_one(index: int):
-    """(index, messages, failure message or None, traceback or None) of one frame."""
+    """(index, messages, stage seconds, failure message or None, traceback or None, seconds)
+    of one frame. ``work`` returns messages or (messages, {stage: seconds})."""
     source, frame_id = _JOB["pairs"][index]
+    start = time.perf_counter()
     try:
-        return index, _JOB["work"](source.load_frame(frame_id)), None, None
+        result = _JOB["work"](source.load_frame(frame_id))
     except Exception as exc:  # sent back to the parent as text, reported there
         reason = str(exc) if isinstance(exc, Sr3dError) else \
             f"unexpected {type(exc).__name__}: {exc}"
-        return index, None, reason, traceback.format_exc()
+        return index, None, {}, reason, traceback.format_exc(), time.perf_counter() - start
+    messages, stages = result if isinstance(result, tuple) else (result, {})
+    return index, messages, stages, None, None, time.perf_counter() - start
 
 
-def parse_shard(spec: str | None) -> tuple[int, int] | None:
+def record_run(source: SceneSource, frame_id: str, command: str, seconds: float,
+               stages: dict[str, float], error: str | None = None) -> None:
+    """Merge this command's outcome into the frame's ``log/<frame>.json``; a log that cannot
+    be written only costs a warning."""
+    from sr3d_cli.io.atomic import write_json
+
+    path = source.output_path("log", frame_id, ".json")
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8")) if path.is_file() else {}
+    except (OSError, ValueError):
+        doc = {}
+    entry = {"status": "failed" if error else "done", "seconds": round(seconds, 4),
+             "stages": {k: round(v, 4) for k, v in stages.items()}}
+    if error:
+        entry["error"] = error
+    doc.setdefault("commands", {})[command] = entry
+    try:
+        write_json(path, doc)
+    except OSError as exc:
+        log.warning("warning: %s: cannot write the run log (%s)", path, exc.strerror or exc)
+
+
+def shard_from_env(env: dict[str, str]) -> tuple[tuple[int, int], str] | None:
+    """(index, count) and where it came from: a Slurm job array (``SLURM_ARRAY_TASK_ID``,
+    ``_MIN``, ``_STEP``, ``_COUNT`` or ``_MAX``: task ids need not start at 0) or a Kubernetes
+    indexed Job (``JOB_COMPLETION_INDEX``, with ``SR3D_SHARD_COUNT`` set to the Job's
+    completions, which Kubernetes does not pass to the pod). None when neither is there."""
+    def number(key: str) -> int | None:
+        try:
+            return int(env[key])
+        except (KeyError, ValueError):
+            return None
+
+    task = number("SLURM_ARRAY_TASK_ID")
+    if task is not None:
+        first = number("SLURM_ARRAY_TASK_MIN") or 0
+        step = number("SLURM_ARRAY_TASK_STEP") or 1
+        count = number("SLURM_ARRAY_TASK_COUNT")
+        if count is None and number("SLURM_ARRAY_TASK_MAX") is not None:
+            count = (number("SLURM_ARRAY_TASK_MAX") - first) // step + 1
+        if count is not None:
+            return ((task - first) // step, count), "Slurm array"
+    index = number("JOB_COMPLETION_INDEX")
+    if index is not None and number("SR3D_SHARD_COUNT") is not None:
+        return (index, number("SR3D_SHARD_COUNT")), "Kubernetes indexed Job"
+    return None
+
+
+def parse_shard(spec: str | None, env: dict[str, str] | None = None) -> tuple[int, int] | None:
+    """``I/N`` -> (I, N); ``auto`` -> from the environment (:func:`shard_from_env`)."""
     if not spec:
         return None
+    if spec == "auto":
+        import os
+
+        found = shard_from_env(dict(os.environ) if env is None else env)
+        if found is None:
+            raise click.BadParameter(
+                "auto: no Slurm array (SLURM_ARRAY_TASK_ID with SLURM_ARRAY_TASK_COUNT) or "
+                "Kubernetes indexed Job (JOB_COMPLETION_INDEX with SR3D_SHARD_COUNT) in the "
+                "environment", param_hint="--shard")
+        (i, n), where = found
+        if not (n >= 1 and 0 <= i < n):
+            raise click.BadParameter(f"auto: {where} gives shard {i} of {n}",
+                                     param_hint="--shard")
+        log.info("--shard auto: shard %d of %d (%s)", i, n, where)
+        return i, n
     try:
         i, n = (int(x) for x in spec.split("/"))
     except ValueError:
@@ -99,17 +173,19 @@ def _finished(source: SceneSource, frame_id: str, paths: list[Path],
 
 
 def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str | None,
-               work: Callable[[Frame], list[str]], *, batch: dict | None = None,
+               work: Callable[[Frame], list[str] | tuple[list[str], dict]], *,
+               batch: dict | None = None,
                outputs: Callable[[SceneSource, str], list[Path]] | None = None,
                after: Callable[[list[SceneSource]], None] | None = None,
                stale: Callable[[SceneSource, str], str | None] | None = None) -> None:
     """Load each selected frame and call ``work(frame)``, which returns object-level messages
-    (printed as warnings) or raises (that frame fails; :class:`~sr3d_cli.errors.FrameFailed`
-    when it wrote outputs that say why). ``batch``: the values of :func:`batch_options`;
-    ``outputs(scene, frame_id)``: the files that mark a frame done; ``stale(scene, frame_id)``:
-    why those outputs no longer match their inputs (None: current); ``after(scenes)`` runs once
-    the frames are done. Ctrl-C stops the workers and exits 130. Exits with the report's
-    code."""
+    (printed as warnings), or (messages, {stage: seconds}); or raises (that frame fails;
+    :class:`~sr3d_cli.errors.FrameFailed` when it wrote outputs that say why). Each frame's
+    outcome and time go to its run log (:func:`record_run`). ``batch``: the values of
+    :func:`batch_options`; ``outputs(scene, frame_id)``: the files that mark a frame done;
+    ``stale(scene, frame_id)``: why those outputs no longer match their inputs (None:
+    current); ``after(scenes)`` runs once the frames are done. Ctrl-C stops the workers and
+    exits 130. Exits with the report's code."""
     ctx = click.get_current_context()
     report = Report(verbose=ctx.meta["sr3d.verbose"])
     batch = batch or {}
@@ -139,13 +215,15 @@ def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str 
             results = pool.imap_unordered(_run_one, range(len(pairs)))
         else:
             results = map(_run_one, range(len(pairs)))
-        for index, messages, failure, details in results:
+        for index, messages, stages, failure, details, seconds in results:
             source, frame_id = pairs[index]
             key = source.frame_key(frame_id)
             bar.update()
             if failure is not None:
                 report.fail(key, failure, details=details)
+                record_run(source, frame_id, name, seconds, stages, report.failures[-1])
                 continue
+            record_run(source, frame_id, name, seconds, stages)
             for message in messages:
                 log.warning("warning: %s %s", key, message)
             report.ok()
@@ -170,9 +248,10 @@ def batch_options(func):
 
     @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
                   help="Frames processed in parallel (processes).")
-    @click.option("--shard", metavar="I/N",
-                  help="Only the frames of shard I of N (0-based; stable split, e.g. a Slurm "
-                       "array or Kubernetes indexed job: --shard $IDX/$COUNT).")
+    @click.option("--shard", metavar="I/N|auto",
+                  help="Only the frames of shard I of N (0-based; a stable split). auto: from "
+                       "a Slurm job array or a Kubernetes indexed Job (README: \"Running on a "
+                       "cluster\").")
     @click.option("--skip-existing", is_flag=True,
                   help="Leave frames whose outputs exist and are current (resume an "
                        "interrupted run); stale ones are made again.")
