@@ -93,8 +93,11 @@ def test_dropouts_beyond_the_table_are_not_objects(synth_set, monkeypatch):
     assert on_wall == []
     found = instance_ious(inst.ids, gt)
     assert np.mean([v > 0.5 for v in found.values()]) >= 0.5
-    # without the table-footprint gate the wall's holes do come out as objects
+    # without the table-footprint gate (and the outline check and the least area, which reject
+    # these plain dropouts too) the wall's holes do come out as objects
     monkeypatch.setattr(training_free, "ON_TABLE_SHARE", 0.0)
+    monkeypatch.setattr(training_free, "FAINT_SHARE", 0.0)
+    monkeypatch.setattr(training_free, "MIN_IMAGE_SHARE", 0.0)
     ungated = segmenter(fid, frame.rgb, depth, frame.camera.K)
     assert len(ungated.objects) > len(inst.objects)
 
@@ -458,6 +461,7 @@ def test_a_glass_beside_a_can_does_not_take_in_the_table_between_them(monkeypatc
     depth[glass & ~through] = 0
     depth = depth.astype(np.float32)
     rgb = np.full(depth.shape + (3,), 128, np.uint8)
+    rgb[glass & ~(((u - 137) / 38.0) ** 2 + ((v - 120) / 53.0) ** 2 <= 1)] = 200  # its rim
     gap = (u > 177) & (u < 186) & (v >= 75) & (v < 165)
 
     def glass_mask():

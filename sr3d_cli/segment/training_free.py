@@ -23,9 +23,11 @@ The steps:
    apart on the table (one object behind another), kept split only where solids of revolution
    on the table explain the parts clearly better than the whole (the revolution fit of
    :mod:`sr3d_cli.reconstruct.revolution_fit`);
-7. instances that are too small or too large to be an object on the table dropped, and those
+7. instances that are too small or too large to be an object on the table dropped, those
    whose colour replaces the table's (an opaque object: glass shows the table through itself,
-   :func:`table_colour_departure`); each kept instance grown to its colour outline
+   :func:`table_colour_departure`) and those with no outline in colour at all (a sensor's
+   dropout on a plain surface, :func:`shows_outline`); each kept instance grown to its colour
+   outline
    (:func:`grow_to_outline`), as a real glass's depth evidence covers only part of it.
 """
 
@@ -58,13 +60,18 @@ BORDER_REACH = 0.1  # share of the image width along its sides where holes may b
 # 0.5 m for a D415 at 1280 px); see evidence_maps
 ENCLOSED_SHARE = 0.8  # share of a gap's surroundings the region must hold to fill it (_enclosed)
 EDGE_REACH, EDGE_SHARE, EDGE_THIN = 8, 0.8, 4.0  # an opaque object's edge band (opaque_edges)
-MIN_IMAGE_SHARE = 0.0014  # least share of the image an instance covers (600 px at 848x480): the
+MIN_IMAGE_SHARE = 0.001  # least share of the image an instance covers (400 px at 848x480): the
 # clusters of dropouts a real stereo camera scatters over a plain table are smaller
 OPAQUE_COLOUR = 3.5  # median colour departure from the table around it (table_colour_departure)
 # above which an instance is an opaque object: glass shows the table through itself
+LEAST_SPREAD = 2.0  # CIELAB units: the table's colour spread is taken as at least a just
+# noticeable difference, so a perfectly plain table does not turn every shade into a departure
 COLOUR_WINDOW = 31  # pixels: the neighbourhood the table's local colour is taken from
+FAINT_COLOUR, FAINT_SHARE = 1.5, 0.03  # an instance is a dropout, not glass, when under this
+# share of the band around its edge departs from the table's colour by this much (shows_outline)
 OUTLINE_COLOUR = 2.5  # colour departure that marks a glass's outline, rim or highlight
 OUTLINE_REACH = 25  # pixels around an instance searched for its outline (grow_to_outline)
+OPAQUE_BAND = 8  # pixels around opaque evidence an instance is not grown into
 MAX_IMAGE_SHARE = 0.4  # most share of the image one instance covers: a region that large is the
 # table or the room failing as a whole, not an object standing on it
 
@@ -170,7 +177,8 @@ def on_table_readings(depth_m: np.ndarray, K: np.ndarray, plane: Plane
 def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray,
                            window: int = COLOUR_WINDOW) -> np.ndarray:
     """How far each pixel's colour departs from the table's colour around it ``(H, W) float``,
-    in units of the table's own spread (the 90th percentile of table pixels' departure), NaN
+    in units of the table's own spread (the 90th percentile of table pixels' departure, at
+    least :data:`LEAST_SPREAD`), NaN
     where no table reading lies within ``window`` pixels.
 
     The table's local colour is the mean CIELAB colour of the pixels whose readings lie on the
@@ -183,8 +191,8 @@ def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray,
     share = cv2.blur(weight, (window, window))
     local = cv2.blur(lab * weight[..., None], (window, window)) / np.maximum(share, 1e-6)[..., None]
     departure = np.linalg.norm(lab - local, axis=2)
-    spread = np.percentile(departure[on_table], 90) if on_table.any() else 1.0
-    out = departure / max(float(spread), 1e-3)
+    spread = np.percentile(departure[on_table], 90) if on_table.any() else 0.0
+    out = departure / max(float(spread), LEAST_SPREAD)
     out[share <= 0.05] = np.nan
     return out
 
@@ -198,20 +206,56 @@ def looks_opaque(mask: np.ndarray, departure: np.ndarray) -> bool:
     return known.size > 0 and float(np.median(known)) > OPAQUE_COLOUR
 
 
-def grow_to_outline(mask: np.ndarray, departure: np.ndarray, *, close_radius: int,
-                    reach: int = OUTLINE_REACH, level: float = OUTLINE_COLOUR) -> np.ndarray:
+def outline_evidence(departure: np.ndarray, on_table: np.ndarray, level: float = OUTLINE_COLOUR
+                     ) -> np.ndarray:
+    """``(H, W) bool``: pixels whose colour departs from the table's around them by more than
+    ``level`` (:func:`table_colour_departure`) and whose reading is not on the table: a glass's
+    outline, rim and highlights, where a reading is missing or off the table; a shadow cast on
+    the table departs in colour too, but reads the table."""
+    return (np.nan_to_num(departure, nan=0.0) > level) & ~on_table
+
+
+def shows_outline(mask: np.ndarray, departure: np.ndarray) -> bool:
+    """Whether an instance ``(H, W) bool`` has a visible outline: at least :data:`FAINT_SHARE`
+    of the band 3 px either side of its edge departs from the table's colour by over
+    :data:`FAINT_COLOUR` (:func:`table_colour_departure`). A glass's rim, refraction edge or reflections always
+    show somewhere around it; a sensor's dropout on a plain cloth or wall shows the surface's
+    own colour all round (measured on the shared real and extsim frames: glass at least 0.05,
+    dropouts at most 0.012)."""
+    inner = cv2.erode(mask.astype(np.uint8), _disk(3)) > 0
+    band = (cv2.dilate(mask.astype(np.uint8), _disk(3)) > 0) & ~inner
+    return bool((np.nan_to_num(departure[band], nan=0.0) > FAINT_COLOUR).mean() >= FAINT_SHARE)
+
+
+def opaque_objects(opaque: np.ndarray, departure: np.ndarray) -> np.ndarray:
+    """The connected parts of opaque evidence ``(H, W) bool`` that are opaque by their colour
+    too (:func:`looks_opaque`). A real glass's front surface often returns smooth readings
+    above the table, but shows the table's colour through itself."""
+    count, labels = cv2.connectedComponents(opaque.astype(np.uint8), connectivity=8)
+    known = np.isfinite(departure) & (labels > 0)
+    keep = np.zeros(count, bool)
+    for k in np.unique(labels[known]):
+        keep[k] = float(np.median(departure[known & (labels == k)])) > OPAQUE_COLOUR
+    return keep[labels]
+
+
+def grow_to_outline(mask: np.ndarray, outline: np.ndarray, *, close_radius: int,
+                    barred: np.ndarray | None = None, reach: int = OUTLINE_REACH) -> np.ndarray:
     """An instance ``(H, W) bool`` grown to the colour outline around it.
 
     The depth evidence of a real glass often covers only where the sensor failed (its rim, a
     band of holes); the rest of the object reads the table through itself. Its outline, rim
-    and highlights still depart from the table's colour (:func:`table_colour_departure` above
-    ``level``): the pixels within ``reach`` of the instance that do are added, the result closed
-    and filled, and only the parts joined to the instance kept.
+    and highlights still show (``outline``, :func:`outline_evidence`): the outline pixels
+    within ``reach`` of the instance are added, the result closed and filled, and only the
+    parts joined to the instance kept. ``barred`` ``(H, W) bool`` (other instances) is never
+    taken.
     """
     near = cv2.dilate(mask.astype(np.uint8), _disk(reach)) > 0
-    grown = mask | (near & (np.nan_to_num(departure, nan=0.0) > level))
+    grown = mask | (near & outline)
     grown = cv2.morphologyEx(grown.astype(np.uint8), cv2.MORPH_CLOSE, _disk(close_radius)) > 0
     grown = ndimage.binary_fill_holes(grown)
+    if barred is not None:
+        grown &= ~barred
     count, labels = cv2.connectedComponents(grown.astype(np.uint8), connectivity=8)
     keep = np.unique(labels[mask & grown])
     return np.isin(labels, keep[keep > 0])
@@ -362,8 +406,10 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     pieces = [p for p in pieces if (p & footprint).sum() >= ON_TABLE_SHARE * p.sum()]
     if grabcut_iterations > 0:
         pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
-    departure = table_colour_departure(rgb, on_table_readings(depth_m, K, plane)[1])
-    out = []
+    on_table = on_table_readings(depth_m, K, plane)[1]
+    departure = table_colour_departure(rgb, on_table)
+    outline = outline_evidence(departure, on_table)
+    kept = []
     size = depth_m.size
     least = max(min_area, int(MIN_IMAGE_SHARE * size))
     pieces = [p for p in pieces if p.sum() <= MAX_IMAGE_SHARE * size]
@@ -371,11 +417,17 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
         for mask in split_touching(region, K, plane, depth=depth_m, glass=glass,
                                    close_radius=close_radius, min_area=min_area):
             if least <= mask.sum() <= MAX_IMAGE_SHARE * size and \
-                    not looks_opaque(mask, departure):
-                score = float(glass[mask].mean())
-                out.append(Candidate(grow_to_outline(mask, departure, close_radius=5), score))
-    out = _without_overlaps(out)
-    return sorted(out, key=lambda c: -int(c.mask.sum()))
+                    not looks_opaque(mask, departure) and shows_outline(mask, departure):
+                kept.append(Candidate(mask, float(glass[mask].mean())))
+    # never grown into: another instance, or an opaque object and the band of missing readings
+    # a stereo camera leaves around it
+    claimed = cv2.dilate(opaque_objects(opaque, departure).astype(np.uint8),
+                         _disk(OPAQUE_BAND)) > 0
+    for c in kept:
+        claimed |= c.mask
+    out = [Candidate(grow_to_outline(c.mask, outline, close_radius=5,
+                                     barred=claimed & ~c.mask), c.score) for c in kept]
+    return _without_overlaps(out)
 
 
 def _without_overlaps(found: list[Candidate]) -> list[Candidate]:

@@ -1,0 +1,193 @@
+"""The headline sections of ``make bench``: data sr3d was not built on.
+
+- ``realdata``: ../shared/realdata (real D4xx frames, painted-object or CAD ground truth), the
+  whole default ``repair-depth`` from the raw frame, no masks given: segmentation against the
+  true objects, invented depth off the objects, object depth beside raw depth and OpenCV
+  inpainting given the true masks, seconds per frame on one core.
+- ``extsim``: ../shared/extsim (an independent renderer, scanned household meshes), the same
+  pipeline plus grasps judged on the true meshes.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from sr3d_cli import stages
+from sr3d_cli.config import Config, IOConfig
+from sr3d_cli.evaluate import depth_metrics, mean_metrics
+from sr3d_cli.io.formats import discover_scenes
+from sr3d_cli.io.images import write_depth
+from sr3d_cli.pipeline import Pipeline
+from sr3d_cli.repair import inpaint_fill, plane_fill
+
+SHARED = Path(__file__).resolve().parent.parent.parent / "shared"
+DETECTED_IOU = 0.5  # a true object is found when an instance overlaps it this well
+FALSE_IOU, FALSE_AREA = 0.2, 300  # an instance this large overlapping no object this well
+INVENTED_REACH, INVENTED_CHANGE = 15, 0.01  # px from every object; metres of change
+STAGES = ("segment", "reconstruct", "align", "render", "total")
+
+
+def segmentation_scores(pred: np.ndarray, truth: np.ndarray) -> dict:
+    """Each true object's best IoU ``{id: iou}`` with a predicted instance, and the predicted
+    instances of at least :data:`FALSE_AREA` px whose IoU with every true object is below
+    :data:`FALSE_IOU`. pred, truth : (H, W) int instance ids, 0 = background."""
+    true_ids = [int(v) for v in np.unique(truth) if v > 0]
+    pred_ids = [int(v) for v in np.unique(pred) if v > 0]
+    iou = np.zeros((len(true_ids), len(pred_ids)))
+    for i, a in enumerate(true_ids):
+        ta = truth == a
+        for j, b in enumerate(pred_ids):
+            pb = pred == b
+            iou[i, j] = (ta & pb).sum() / max((ta | pb).sum(), 1)
+    best = {a: float(iou[i].max()) if pred_ids else 0.0 for i, a in enumerate(true_ids)}
+    false = sum(1 for j, b in enumerate(pred_ids)
+                if (pred == b).sum() >= FALSE_AREA and (not true_ids or iou[:, j].max() < FALSE_IOU))
+    return {"best_iou": best, "false": false}
+
+
+def invented_share(repaired: np.ndarray, raw: np.ndarray, truth: np.ndarray) -> float:
+    """Share of the frame's pixels farther than :data:`INVENTED_REACH` px from every true object
+    where the repaired depth differs from the raw by more than :data:`INVENTED_CHANGE` m."""
+    far = cv2.distanceTransform((truth == 0).astype(np.uint8), cv2.DIST_L2, 3) > INVENTED_REACH
+    changed = np.abs(repaired.astype(np.float64) - raw.astype(np.float64)) > INVENTED_CHANGE
+    return float((far & changed).sum() / truth.size)
+
+
+def run_set(root: Path, work: Path, cfg: Config, one_core, grasps: bool = False) -> dict:
+    """The whole default pipeline on every frame below ``root`` (its ground truth never read
+    by the pipeline); numbers as described in the module docstring. ``work`` is emptied first:
+    every stage runs, and is timed, on the current code."""
+    shutil.rmtree(work, ignore_errors=True)
+    rows = {m: [] for m in ("raw", "plane-fill", "inpaint", "sr3d")}
+    ious, false, invented, timings, frames, judged = [], [], [], [], [], []
+    planner = None
+    if grasps:
+        from sr3d_cli.grasp.planner import Planner
+
+        planner = Planner(cfg.grasp)
+    for source in discover_scenes(root, IOConfig(), None):
+        staged = type(source)(source.root, out=work / source.name, name=source.name,
+                              io=source.io)
+        for fid in staged.frame_ids():
+            frame = staged.load_frame(fid)
+            truth = staged.load_mask(staged.gt_mask_path(fid), frame.depth_m.shape)
+            gt = staged.load_gt_depth(fid, frame.depth_m.shape)
+            pipe, t = Pipeline(cfg), {}
+            with one_core():
+                start = time.perf_counter()
+                try:
+                    pipe.ensure_upstream(frame, t)
+                    t0 = time.perf_counter()
+                    depth, ids = pipe.repaired_depth(frame)
+                    t["render"] = time.perf_counter() - t0
+                except Exception as exc:  # a frame the pipeline fails on counts as raw depth
+                    print(f"{staged.frame_key(fid)}: failed: {exc}", file=sys.stderr)
+                    depth, ids = frame.depth_m, np.zeros(frame.depth_m.shape, np.int32)
+                t["total"] = time.perf_counter() - start
+            timings.append(t)
+            pred, _ = stages.load_instances(staged, fid, frame.depth_m.shape) \
+                if staged.stage_file("masks", fid, (".png",)) else (ids, {})
+            seg = segmentation_scores(pred, truth)
+            ious += list(seg["best_iou"].values())
+            false.append(seg["false"])
+            invented.append(invented_share(depth, frame.depth_m, truth))
+            mask = truth > 0
+            plane, _ = stages.frame_plane(frame, truth, cfg.plane)
+            preds = {"raw": frame.depth_m, "sr3d": depth,
+                     "plane-fill": plane_fill(frame.depth_m, mask, plane, frame.camera.K)
+                     if plane is not None else frame.depth_m,
+                     "inpaint": inpaint_fill(frame.depth_m, mask)}
+            for m, p in preds.items():
+                rows[m].append(depth_metrics(p, gt, mask))
+            if planner is not None:
+                write_depth(staged.output_path("repaired", fid), depth, frame.camera.depth_scale)
+                with one_core():
+                    t0 = time.perf_counter()
+                    stages.grasp_frame(frame, planner, cfg.plane, "repaired")
+                    t["grasp"] = time.perf_counter() - t0
+                judged.append(stages.evaluate_grasp_frame(staged, fid, cfg))
+            frames.append(staged.frame_key(fid))
+            print(staged.frame_key(fid), "IoU", [round(v, 2) for v in seg["best_iou"].values()],
+                  "false", seg["false"], f"sr3d {rows['sr3d'][-1]['mae'] * 1000:.1f} mm",
+                  f"raw {rows['raw'][-1]['mae'] * 1000:.1f} mm", f"{t['total']:.1f} s",
+                  file=sys.stderr)
+    out = {"frames": len(frames), "objects": len(ious),
+           "detection": float(np.mean([v >= DETECTED_IOU for v in ious])) if ious else 0.0,
+           "mean_iou": float(np.mean(ious)) if ious else 0.0,
+           "false_per_frame": float(np.mean(false)), "invented_share": float(np.mean(invented)),
+           "depth": {m: mean_metrics(r) for m, r in rows.items()},
+           "median_mae": {m: float(np.median([x["mae"] for x in r])) for m, r in rows.items()},
+           "seconds": {k: float(np.median([t[k] for t in timings if k in t]))
+                       for k in (*STAGES, "grasp") if any(k in t for t in timings)},
+           "max_seconds": float(max(t["total"] for t in timings))}
+    if judged:
+        from sr3d_cli.grasp.quality import overall
+
+        g = overall(judged)
+        out["grasp"] = {k: g[k] for k in ("objects", "objects_with_grasps", "top1_success",
+                                          "top10_success")}
+    return out
+
+
+def realdata_section(work: Path, cfg: Config, one_core) -> dict:
+    root = SHARED / "realdata"
+    if not root.is_dir():
+        return {"skipped": f"{root} not present"}
+    return run_set(root, work / "realdata_nomask", cfg, one_core)
+
+
+def extsim_section(work: Path, cfg: Config, one_core) -> dict:
+    root = SHARED / "extsim"
+    if not root.is_dir():
+        return {"skipped": f"{root} not present"}
+    return run_set(root, work / "extsim", cfg, one_core, grasps=True)
+
+
+def report(results: dict) -> list[str]:
+    """The headline sections of RESULTS.md."""
+    lines = []
+    for key, title, note in (
+            ("realdata", "real frames, no masks given (../shared/realdata)",
+             "3 ClearGrasp frames (D435, D415, 1280x720) and 8 Tracebot views (D435, 1280x720): "
+             "the whole default `repair-depth` from the raw frame."),
+            ("extsim", "independent renderer (../shared/extsim)",
+             "16 frames (848x480) of scanned household meshes, 1-3 objects each: the whole "
+             "default pipeline from the raw frame; grasps (one draw) judged on the true meshes "
+             "at friction 0.5.")):
+        r = results.get(key, {})
+        if not r:
+            continue
+        lines += [f"## {title}", ""]
+        if "skipped" in r:
+            lines += [f"skipped: {r['skipped']}", ""]
+            continue
+        lines += [note, "",
+                  f"- segmentation: {r['objects']} true objects, detected (best IoU >= "
+                  f"{DETECTED_IOU}) {r['detection']:.2f}, mean best IoU {r['mean_iou']:.3f}, "
+                  f"false instances per frame {r['false_per_frame']:.2f} (>= {FALSE_AREA} px, "
+                  f"IoU < {FALSE_IOU} with every object)",
+                  f"- invented depth: {100 * r['invented_share']:.2f}% of the frame (pixels over "
+                  f"{INVENTED_REACH} px from every object changed by over "
+                  f"{100 * INVENTED_CHANGE:.0f} cm)",
+                  "- median seconds per frame on one core: " + ", ".join(
+                      f"{k} {v:.2f}" for k, v in r["seconds"].items())
+                  + f"; slowest frame {r['max_seconds']:.1f} s"]
+        if "grasp" in r:
+            g = r["grasp"]
+            lines.append(f"- grasps: {g['objects']} objects, {g['objects_with_grasps']} with "
+                         f"grasps, top-1 {g['top1_success']:.3f}, top-10 "
+                         f"{g['top10_success']:.3f}")
+        lines += ["", "Object depth over the true masks (holes count full error); plane-fill and "
+                      "inpaint are given the true masks:", "",
+                  "| method | RMSE m | REL | MAE m | median MAE mm |", "|---|---|---|---|---|"]
+        for m, x in r["depth"].items():
+            lines.append(f"| {m} | {x['rmse']:.4f} | {x['rel']:.4f} | {x['mae']:.4f} | "
+                         f"{1000 * r['median_mae'][m]:.1f} |")
+        lines.append("")
+    return lines
