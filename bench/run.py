@@ -765,8 +765,8 @@ def write_report(results: dict, methods) -> None:
              "Depth metrics over the ground-truth object "
              "masks, holes counted with full error, mean over frames (median MAE separately). "
              "Synthetic: 24 frames, seed 700, full default pipeline (training-free segment -> "
-             "revolution reconstruct -> align -> repair). Real: ../shared/realdata (ClearGrasp "
-             "and Tracebot, true masks imported). `paper` = same pipeline with `align.mode: "
+             "revolution reconstruct -> align -> repair). Real: the two ClearGrasp frames of "
+             "../shared/realdata/cleargrasp-real, true masks imported. `paper` = same pipeline with `align.mode: "
              "paper` (162 viewpoints x 4 rolls, to keep the run short).", ""]
     for label in ("synthetic", "real"):
         r = results[label]
