@@ -259,6 +259,7 @@ def test_an_object_just_under_the_opening_is_held_with_tight_margins():
     assert summary["top1"] == {"1": True}
 
 
+@pytest.mark.slow
 def test_an_object_nothing_holds_on_at_the_friction_gets_its_best_grasp_flagged():
     """A cone cut 30 degrees from its axis, 7 cm across its foot: no two points of it face
     each other well enough to hold at friction 0.5. With ``fallback_friction`` off it gets no
@@ -519,6 +520,7 @@ def test_grasp_cli_bad_frames_give_empty_valid_files(synth_set, tmp_path):
     assert doc["grasps"] == [] and "no repaired depth" in doc["failed"][0]
 
 
+@pytest.mark.slow
 def test_grasp_end_to_end_beats_raw_depth(synth_set, tmp_path):
     """Repair, plan on repaired and on raw depth, judge both against the true meshes."""
     runner = CliRunner()
@@ -563,6 +565,7 @@ def test_grasp_end_to_end_beats_raw_depth(synth_set, tmp_path):
     assert list(option.type.choices) == list(CONTACTS)
 
 
+@pytest.mark.slow
 def test_the_placed_mesh_rescores_the_best_grasps_by_their_exact_contacts():
     """A goblet and a wine glass (curved bowls, a stem, a rim): the planner's patch normals
     average over sampled points, so its best grasps by them need more friction, with the jaws
@@ -614,6 +617,7 @@ def _best_held(model: trimesh.Trimesh, truth: TrueScene, seeds: int = 10, **sett
     return held
 
 
+@pytest.mark.slow
 def test_the_best_grasps_hold_on_a_model_whose_height_is_a_few_millimetres_off():
     """A 10 cm wide beaker with a lip (too wide for the gripper: held only by its rim) fitted
     4% too tall or too short, as sr3d's fits often are: planned on the model, judged on the
@@ -634,6 +638,7 @@ def test_the_best_grasps_hold_on_a_model_whose_height_is_a_few_millimetres_off()
     assert np.mean(held[0.004]) >= np.mean(held[0.0]) + 0.25, held
 
 
+@pytest.mark.slow
 def test_the_best_grasps_hold_on_a_model_whose_wall_leans_a_few_degrees_off():
     """A 10 cm wide lipped beaker (held only by its rim) whose model's wall leans 3 degrees
     outwards, as sr3d's fits of straight walls often do (the rim in place, the base 6 mm
@@ -768,6 +773,7 @@ def test_on_a_placed_model_the_centre_term_favours_the_middle_of_a_stem():
     assert by_height[1] > by_height[0]
 
 
+@pytest.mark.slow
 def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback():
     """A beaker 10.8 cm across lying on its side, its mouth turned away from the camera: the
     model is a closed solid (nothing seen tells an open end from a closed one), too wide for

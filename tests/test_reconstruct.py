@@ -545,6 +545,7 @@ def test_a_lying_beaker_is_opened_where_the_camera_sees_into_it():
         assert (np.linalg.norm(ends[0]) > np.linalg.norm(ends[1])) != towards
 
 
+@pytest.mark.slow
 def test_shape_error_on_generated_glassware(synth_set):
     """Chamfer / height against the ground-truth mesh's outer envelope, ground-truth masks."""
     errors = []

@@ -43,6 +43,7 @@ def test_support_plane_recovers_a_tilted_table():
     assert abs(plane.offset - d_true) < 0.003
 
 
+@pytest.mark.slow
 def test_training_free_masks_match_ground_truth(synth_set):
     """Floors on six generated scenes: mean IoU and the share of objects found (IoU > 0.5)."""
     segmenter = Segmenter(SegmentConfig(), PlaneConfig())
@@ -64,6 +65,7 @@ def test_training_free_masks_match_ground_truth(synth_set):
     assert np.mean(np.array(ious) > 0.5) >= 0.8
 
 
+@pytest.mark.slow
 def test_dropouts_beyond_the_table_are_not_objects(synth_set, monkeypatch):
     """A wall behind the table, riddled with dropouts (as a white wall is for a RealSense):
     none of its holes may become an instance; the objects on the table still do."""
@@ -102,6 +104,7 @@ def test_dropouts_beyond_the_table_are_not_objects(synth_set, monkeypatch):
     assert len(ungated.objects) > len(inst.objects)
 
 
+@pytest.mark.slow
 def test_a_glass_rising_above_the_tables_far_edge_keeps_its_outline(synth_set):
     """No readings beyond the table's far edge (the room is out of range), and that edge cuts
     the highest object in each frame 30 % down its outline: its outline of holes joins the
@@ -195,7 +198,8 @@ def test_a_vial_against_a_glass_is_split_by_the_readings_but_a_goblet_or_bottle_
         assert len(split_touching(ids > 0, K, plane, depth=sparse(depth))) == 1
 
 
-@pytest.mark.parametrize("aside, ahead", [(0.05, -0.04), (0.045, -0.05)])
+@pytest.mark.parametrize("aside, ahead", [(0.05, -0.04),
+                                          pytest.param(0.045, -0.05, marks=pytest.mark.slow)])
 def test_a_small_vial_against_a_tall_bottle_is_split_by_its_own_readings(aside, ahead, monkeypatch):
     """A 5.5 cm vial in front of a 26 cm bottle's side: one region, of which the vial is under
     4%, so it gets fewer than 30 of the region's 400 sampled readings and the parts cannot gain
@@ -221,6 +225,7 @@ def test_a_small_vial_against_a_tall_bottle_is_split_by_its_own_readings(aside, 
     assert len(split_touching(region, K, plane, depth=sparse)) == 1
 
 
+@pytest.mark.slow
 def test_a_goblet_and_a_glass_whose_union_draws_a_lying_goblet_are_split_by_readings_above_it(
         tmp_path):
     """Generated frame (seed 4700, frame 0): a 16 cm goblet seen from above and a 9 cm glass
@@ -242,6 +247,7 @@ def test_a_goblet_and_a_glass_whose_union_draws_a_lying_goblet_are_split_by_read
     assert min(ious.values()) > 0.95
 
 
+@pytest.mark.slow
 def test_a_goblet_and_a_beaker_are_split_where_their_readings_stand_not_at_the_foot(
         tmp_path, monkeypatch):
     """Generated frame (seed 4500, frame 23): a 15 cm goblet and a 10 cm beaker touching, one
@@ -263,6 +269,7 @@ def test_a_goblet_and_a_beaker_are_split_where_their_readings_stand_not_at_the_f
     assert max(ious()) < 0.6
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rule, value, worst", [(None, None, 0.8),
                                                 ("OUTLINE_OWN_READINGS", 0.5, 0.5),
                                                 ("OUTLINE_REFUTED", 1.0, 0.7)])
@@ -329,6 +336,7 @@ def test_a_glass_partly_hidden_behind_another_is_split_from_it(behind, aside):
     assert min(ious.values()) > 0.89
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed, index, clear", [(6700, 12, False), (6700, 7, True),
                                                 (4300, 8, False)])
 def test_a_small_object_or_one_no_solid_draws_with_its_neighbour_is_split(
@@ -351,6 +359,7 @@ def test_a_small_object_or_one_no_solid_draws_with_its_neighbour_is_split(
         assert min(_segmented_ious(frame, gt).values()) < 0.7
 
 
+@pytest.mark.slow
 def test_a_standing_bottle_a_lying_one_leans_on_is_split_from_it(tmp_path):
     """Generated frame (seed 7100, frame 5, drawn by GL where there is one; the numpy
     renderer's frame splits either way): a lying bottle whose neck rests on a standing one, one
@@ -396,7 +405,9 @@ def _evidence(ids: np.ndarray, holes: int = 60, seed: int = 0) -> np.ndarray:
     return (ids > 0) & (punched == 0)
 
 
-@pytest.mark.parametrize("gap,behind", [(0.055, 0.0), (0.055, 0.03), (0.06, 0.0)])
+@pytest.mark.parametrize("gap,behind", [(0.055, 0.0),
+                                        pytest.param(0.055, 0.03, marks=pytest.mark.slow),
+                                        pytest.param(0.06, 0.0, marks=pytest.mark.slow)])
 def test_two_glasses_a_few_pixels_apart_are_split_along_their_own_evidence(gap, behind):
     """Two straight glasses side by side, a few pixels apart: the candidates' closing fills the
     gap along its whole length, so their region has no neck, and the outline alone keeps one
