@@ -8,6 +8,14 @@ import yaml
 from sr3d_cli.cli.options import UsageExit, common_options, load_config
 
 
+class _Dumper(yaml.SafeDumper):
+    """Sections and keys one per line; lists on one line, as configs/default.yaml writes them."""
+
+
+_Dumper.add_representer(list, lambda dumper, data: dumper.represent_sequence(
+    "tag:yaml.org,2002:seq", data, flow_style=True))
+
+
 @click.command("config")
 @click.argument("name", required=False)
 @common_options
@@ -27,4 +35,5 @@ def config(name):
         if section not in data or (key and key not in data[section]):
             raise UsageExit(f"unknown config {'key' if key else 'section'} '{name}'")
         data = {section: {key: data[section][key]} if key else data[section]}
-    click.echo(yaml.safe_dump(data, sort_keys=False, default_flow_style=None), nl=False)
+    click.echo(yaml.dump(data, Dumper=_Dumper, sort_keys=False, default_flow_style=False),
+               nl=False)
