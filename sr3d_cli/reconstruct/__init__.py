@@ -173,9 +173,9 @@ def unseen_mouth(fit: RevolutionFit, cfg: ReconstructConfig) -> trimesh.Trimesh 
     end is its mouth (a beaker's lip, a tumbler's taper), and a lying fit's base is its wider
     end (19 of 20 lying fits of glasses, beakers and goblets have their base at the true mouth).
     The readings seldom show whether an end is open, even one facing the camera
-    (:func:`open_mouth` keeps most such mouths shut), so the end is taken whichever way it faces. A beaker lying there, wider than
-    the gripper's opening, can only be held by its rim; the grasp stage plans on this model
-    where the closed one gives no grasp."""
+    (:func:`open_mouth` keeps most such mouths shut), so the end is taken whichever way it
+    faces. A beaker lying there, wider than the gripper's opening, can only be held by its rim;
+    the grasp stage plans on this model where the closed one gives no grasp."""
     if fit.resting != "lying":
         return None
     wider = [m for m in mouths(fit, cfg) if m.axis @ fit.axis < 0]  # opened at the base end

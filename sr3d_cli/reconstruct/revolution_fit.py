@@ -337,7 +337,7 @@ def _resting_tilt(z: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     """How a body of revolution lies on a table: on the side of its profile's convex hull
     (:func:`hull_sides`) whose span along the axis holds the centre of mass (of the solid,
     weight r^2); a goblet rests on its foot's rim and its cup, tilted. On fitted, noisy
-    profiles this places the object closer than the exact rule of :func:`resting_edge`.
+    profiles this places the object with less error than the exact rule of :func:`resting_edge`.
     z (L,) increasing along the axis from the base, r (L,) radii (metres). Returns the axis's
     rise towards +z (radians) and the axis's height at z = 0 above the table.
     """
