@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: install demo test bench sample-data clean
+.PHONY: install demo test test-quick bench sample-data clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,8 +20,13 @@ demo: install
 	$(BIN)/sr3d repair-depth sample_data --out build/demo/sample_data --preview
 	$(BIN)/sr3d evaluate sample_data --pred depth --pred repaired --out build/demo/sample_data --plot
 
+# Tests run on every core (pytest-xdist); test-quick leaves out the tests marked slow
+# (whole-pipeline and multi-frame scenarios).
 test: install
-	$(BIN)/python -m pytest -q -rs tests
+	$(BIN)/python -m pytest -n auto -q -rs tests
+
+test-quick: install
+	$(BIN)/python -m pytest -n auto -q -rs -m "not slow" tests
 
 # Regenerates the bundled sample_data/ byte for byte (deterministic for the seed).
 sample-data: install

@@ -12,9 +12,8 @@ frames before it goes near the held-out set. Sets and outputs live under bench/w
         the objects whose count changed
 
 Seeds looked at often get easier than new ones (see ``BREAKDOWN_SEED`` in run.py): a change
-tuned there loses on new seeds what it seemed to win. Try changes on fresh seeds (session 49
-used 10100-10700, session 50 10900-11900, session 51 12100-13100), and read the held-out set
-only as totals.
+tuned there loses on new seeds what it seemed to win. Try changes on fresh seeds (seeds
+already used are listed in bench/HISTORY.md), and read the held-out set only as totals.
 """
 
 from __future__ import annotations

@@ -85,16 +85,16 @@ class OnnxModel:
         options = ort.SessionOptions()
         options.log_severity_level = 3
         try:
-            self.session = ort.InferenceSession(str(self.path), options, providers=chosen)
+            self.runtime = ort.InferenceSession(str(self.path), options, providers=chosen)
         except Exception as exc:  # onnxruntime raises its own exception types
             raise InputError(self.path, f"not a loadable ONNX {role} model "
                                         f"({str(exc).splitlines()[0][:200]})") from None
-        self.providers = list(self.session.get_providers())
+        self.providers = list(self.runtime.get_providers())
         log.info("loaded %s model %s on %s (onnx.providers: %s)", role, self.path,
                  self.providers[0] if self.providers else "?",
                  ", ".join(asked) if asked else "automatic")
-        self.input_names = self._check("input", self.session.get_inputs(), inputs, role)
-        self.output_names = self._check("output", self.session.get_outputs(), outputs, role)
+        self.input_names = self._check("input", self.runtime.get_inputs(), inputs, role)
+        self.output_names = self._check("output", self.runtime.get_outputs(), outputs, role)
 
     def _check(self, kind, found, wanted, role) -> dict[str, str]:
         by_name = {t.name: t for t in found}
@@ -120,5 +120,5 @@ class OnnxModel:
         """Run with ``feeds`` keyed by the wanted names; returns outputs keyed the same way."""
         real = {self.input_names[k]: v for k, v in feeds.items()}
         wanted = list(self.output_names)
-        values = self.session.run([self.output_names[k] for k in wanted], real)
+        values = self.runtime.run([self.output_names[k] for k in wanted], real)
         return dict(zip(wanted, values))

@@ -213,7 +213,7 @@ def _fill_partial_normals(normals: np.ndarray, ids: np.ndarray, full: float = 0.
     """Unit normals from a multisampled normal image ``(H, W, 3)``.
 
     At silhouettes a pixel's value blends the object with the background (a zero vector), so it
-    is short and its direction unreliable (it was measured to vary between identical runs).
+    is short and its direction unreliable (it varies between identical runs).
     Such pixels take the normal of their best-covered 8-neighbour with the same id.
     """
     length = np.linalg.norm(normals, axis=-1)

@@ -53,9 +53,10 @@ def realdata() -> Path:
     return REALDATA
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="package")
 def synth_set(tmp_path_factory) -> Path:
-    """Six synthetic scenes (seed 303, used only by the stage tests), shared by the session."""
+    """Six synthetic scenes (seed 303, used only by the stage tests), made once per test run
+    (once per xdist worker) and only read."""
     from sr3d_cli.config import SynthConfig
     from sr3d_cli.render import make_renderer
     from sr3d_cli.synth.generate import write_scene

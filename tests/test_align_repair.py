@@ -159,6 +159,7 @@ def test_bad_input_is_refused_per_object():
         aligner(flat, mask, K, plane, raw)
 
 
+@pytest.mark.slow
 def test_repair_depth_cli_end_to_end(synth_set, tmp_path):
     scene = synth_set / "scene_0002"
     out = tmp_path / "out"

@@ -1,3 +1,4 @@
+import re
 from pathlib import Path
 
 import pytest
@@ -63,3 +64,54 @@ def test_unreadable_and_invalid_yaml(tmp_path):
     bad.write_text("io: [unclosed\n")
     with pytest.raises(ConfigError, match="broken.yaml: config file is not valid YAML"):
         build_config(bad)
+
+
+def _sr3d_config(*args):
+    from click.testing import CliRunner
+
+    from sr3d_cli.cli import cli
+
+    return CliRunner().invoke(cli, ["config", *args])
+
+
+def test_config_command_prints_the_effective_config_that_config_reads_back(tmp_path):
+    path = tmp_path / "mine.yaml"
+    path.write_text("grasp:\n  seeds: 40\n  friction: 0.3\n")
+    result = _sr3d_config("--config", str(path), "--set", "grasp.seeds=12")
+    assert result.exit_code == 0, result.output
+    printed = yaml.safe_load(result.output)
+    expected = to_dict(build_config(path, ["grasp.seeds=12"]))
+    assert printed == expected
+    assert printed["grasp"]["seeds"] == 12 and printed["grasp"]["friction"] == 0.3
+    assert list(printed) == list(to_dict(Config()))  # sections in the dataclasses' order
+    again = tmp_path / "printed.yaml"
+    again.write_text(result.output)
+    assert to_dict(build_config(again)) == expected
+
+
+def test_config_command_without_a_file_prints_default_yaml_values():
+    result = _sr3d_config()
+    assert result.exit_code == 0, result.output
+    assert yaml.safe_load(result.output) == yaml.safe_load(DEFAULT_YAML.read_text())
+
+
+def test_config_command_narrows_to_a_section_or_key_and_refuses_unknown_names(tmp_path):
+    assert yaml.safe_load(_sr3d_config("synth.distance").output) == {
+        "synth": {"distance": [0.35, 0.9]}}
+    assert _sr3d_config("repair").output == "repair:\n  outside_render: nearest\n"
+    for name in ("nope", "grasp.nope"):
+        result = _sr3d_config(name)
+        assert result.exit_code == 2 and f"'{name}'" in result.output
+    bad = _sr3d_config("--set", "grasp.nope=1")
+    assert bad.exit_code == 2 and "grasp.nope" in bad.output
+
+
+def test_every_command_help_has_an_example():
+    from click.testing import CliRunner
+
+    from sr3d_cli.cli import cli
+
+    for name in cli.commands:
+        result = CliRunner().invoke(cli, [name, "--help"])
+        assert result.exit_code == 0
+        assert re.search(rf"Example:\s+sr3d {name} ", result.output), name

@@ -179,6 +179,7 @@ def test_shard_auto_splits_a_batch_like_explicit_shards(tmp_path, native_scene, 
     assert bad.exit_code == 2 and "JOB_COMPLETION_INDEX" in bad.output
 
 
+@pytest.mark.slow
 def test_align_bop_writes_scene_gt(synth_set, tmp_path):
     scene, out = synth_set / "scene_0004", tmp_path / "out"
     runner = CliRunner()

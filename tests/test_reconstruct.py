@@ -115,10 +115,10 @@ def test_seen_from_steeply_above_a_flask_keeps_its_neck():
 
 @pytest.mark.parametrize("elevation", [40.0, 48.0])
 def test_seen_from_above_a_flask_keeps_a_straight_cone_and_a_goblet_a_thin_stem(elevation):
-    # the flask's base covers its cone, which the outline then leaves free: the update dented
+    # the flask's base covers its cone, which the outline then leaves free: the update dents
     # it (6.9 and 9.6 mm narrow at 40 and 48 degrees), filled straight it is within 3.1 and
     # 4.2 mm. A goblet's stem, covered by its bowl above, must not be filled so (its profile
-    # widens again: 2.6-5.2 mm at 40 and 48 degrees, as before)
+    # would widen again; it stays within 2.6-5.2 mm at 40 and 48 degrees)
     plane = _table(elevation, 0.6)
     base = plane.intersect(np.array([0.0, 0.03, 1.0]))
     h, body, neck = 0.11, 0.048, 0.015
@@ -160,8 +160,8 @@ def test_seen_from_above_a_beaker_keeps_a_straight_rim(elevation, spill):
 
 @pytest.mark.parametrize("elevation", [45.0, 65.0])
 def test_a_beaker_with_a_wide_lip_keeps_a_straight_rim(elevation):
-    # a 10% lip: the free fit, curling in above it, drew the outline 0.2-0.5% better than the
-    # straight one (beyond the 0.2% once allowed) and came out 13% and 40% too tall
+    # a 10% lip: the free fit, curling in above it, draws the outline 0.2-0.5% better than the
+    # straight one and comes out 13% and 40% too tall (so straight_top_gap is 0.5%)
     plane = _table(elevation, 0.6)
     base = plane.intersect(np.array([0.0, 0.03, 1.0]))
     r, h = 0.035, 0.065
@@ -207,7 +207,7 @@ def test_lying_bottle_recovered_with_its_base_at_the_wide_end():
 def test_a_lying_beaker_as_long_as_it_is_wide_is_found_lying(length, monkeypatch):
     """Laid across the view, a 7 cm wide beaker about as long draws a near-square outline whose
     major axis and orientation say nothing of its axis; started only along that major axis, the
-    lying fit turned across the true axis and lost to a squat standing one."""
+    lying fit turns across the true axis and loses to a squat standing one."""
     plane = _table(45.0, 0.55)
     axis = np.array([1.0, 0, 0]) - (np.array([1.0, 0, 0]) @ plane.normal) * plane.normal
     axis = axis / np.linalg.norm(axis)
@@ -366,9 +366,9 @@ def test_seen_down_its_axis_a_bottle_takes_its_profile_from_the_readings():
 def test_seen_from_above_a_beaker_is_as_tall_as_its_rim_not_its_readings_noise(elevation):
     """Looked down on, a beaker's height comes from the readings on its rim; glass readings
     scatter along the ray (4 mm here, as sr3d's synthetic sensor draws them), and their high
-    percentile lies above the rim by about twice that. Measured before the outline placed the
-    ends: 6.4% and 6.9% too tall; after, 2.4% and 4.0% (at 78 degrees one pixel of outline is
-    4 mm of height)."""
+    percentile lies above the rim by about twice that. Measured: 2.4% and 4.0% too tall with
+    the outline placing the ends, 6.4% and 6.9% by the readings alone (at 78 degrees one pixel
+    of outline is 4 mm of height)."""
     r, h = 0.042, 0.08
     beaker = np.array([[0, 0], [r, 0], [r, h - 0.003], [1.06 * r, h], [0, h]])
     inside = open_vessel(beaker[:-1] / h, 0.002 / h, 0.004 / h) * h
@@ -421,7 +421,7 @@ def test_a_carved_bowl_narrows_into_its_stem_below_the_readings_that_find_it():
     """A goblet whose rounded bowl meets its stem at 55 mm, seen steeply from above, where
     the bowl's lower outside (55-95 mm up) returns nothing, as glass met at a grazing angle
     does: the readings find the bowl only from 95 mm. Measured: carved to a flat floor on the
-    stem, the stem ran up to 89 mm and the model was 19 and 21 mm too thin at 80 and 90 mm;
+    stem, the stem runs up to 89 mm and the model is 19 and 21 mm too thin at 80 and 90 mm;
     with the bowl narrowing at 45 degrees below the readings, the stem's top is at 68 mm and
     the radius 6 and 1 mm off there."""
     t = np.linspace(0, 1, 9)[1:]
@@ -545,6 +545,7 @@ def test_a_lying_beaker_is_opened_where_the_camera_sees_into_it():
         assert (np.linalg.norm(ends[0]) > np.linalg.norm(ends[1])) != towards
 
 
+@pytest.mark.slow
 def test_shape_error_on_generated_glassware(synth_set):
     """Chamfer / height against the ground-truth mesh's outer envelope, ground-truth masks."""
     errors = []
@@ -702,12 +703,12 @@ def test_cli_reconstruct_writes_watertight_meshes_and_object_messages(synth_set,
 
 
 def test_an_open_beaker_looked_into_stands_by_the_readings_inside_it(tmp_path):
-    """A 12.6 cm beaker seen from 64 degrees above the table (generated scene 20 of seed 1500,
-    where it was found): its outline fits a short lying solid about as well as the standing one,
-    so the raw readings vote. Most of them lie inside the beaker, on its floor and inner wall,
-    which only the open standing model has: counted on the lidded one, the lying fit took 70 of
-    them against 29, and the beaker was laid down (a 42 mm depth error over it). A change to
-    the generator redraws the scene: find such a beaker again on the breakdown's study set."""
+    """A 12.6 cm beaker seen from 64 degrees above the table (generated scene 20 of seed
+    1500): its outline fits a short lying solid about as well as the standing one, so the raw
+    readings vote. Most of them lie inside the beaker, on its floor and inner wall, which only
+    the open standing model has: counted on the lidded one, the lying fit takes 70 of them
+    against 29, and the beaker is laid down (a 42 mm depth error over it). A change to the
+    generator redraws the scene: then pick another such beaker from generated frames."""
     from sr3d_cli.config import PlaneConfig
     from sr3d_cli.segment import support_plane
 
@@ -717,13 +718,13 @@ def test_an_open_beaker_looked_into_stands_by_the_readings_inside_it(tmp_path):
     K_frame = frame.camera.K
     plane = support_plane(frame.depth_m, K_frame, PlaneConfig(), exclude=ids > 0)
     mask = ids == 3
-    # the vote as it was: readings counted on the closed solids only
+    # without the open models the readings are counted on the closed solids only
     assert fit_revolution(mask, K_frame, plane, depth=frame.depth_m).resting == "lying"
     rec = Reconstructor(ReconstructConfig())(frame.rgb, mask, K_frame, plane, "", frame.depth_m)
     assert rec.meta["resting"] == "standing" and rec.meta["open_top"]
     axis = np.asarray(rec.meta["pose_hint"]["T_cam_obj"])[:3, 2]
     assert axis @ plane.normal > np.cos(np.radians(3))
-    # measured: 13.95 cm (the hidden rim makes it 10% tall; lying, it was 13.5 cm long)
+    # measured: 13.95 cm (the hidden rim makes it 10% tall; the lying fit is 13.5 cm long)
     assert rec.meta["pose_hint"]["scale"] == pytest.approx(truth["scale"], rel=0.12)
 
 

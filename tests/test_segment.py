@@ -43,8 +43,9 @@ def test_support_plane_recovers_a_tilted_table():
     assert abs(plane.offset - d_true) < 0.003
 
 
+@pytest.mark.slow
 def test_training_free_masks_match_ground_truth(synth_set):
-    """Floors on six generated scenes (measured 20+ frame numbers are in the closing note)."""
+    """Floors on six generated scenes: mean IoU and the share of objects found (IoU > 0.5)."""
     segmenter = Segmenter(SegmentConfig(), PlaneConfig())
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
@@ -64,6 +65,7 @@ def test_training_free_masks_match_ground_truth(synth_set):
     assert np.mean(np.array(ious) > 0.5) >= 0.8
 
 
+@pytest.mark.slow
 def test_dropouts_beyond_the_table_are_not_objects(synth_set, monkeypatch):
     """A wall behind the table, riddled with dropouts (as a white wall is for a RealSense):
     none of its holes may become an instance; the objects on the table still do."""
@@ -102,11 +104,12 @@ def test_dropouts_beyond_the_table_are_not_objects(synth_set, monkeypatch):
     assert len(ungated.objects) > len(inst.objects)
 
 
+@pytest.mark.slow
 def test_a_glass_rising_above_the_tables_far_edge_keeps_its_outline(synth_set):
     """No readings beyond the table's far edge (the room is out of range), and that edge cuts
     the highest object in each frame 30 % down its outline: its outline of holes joins the
     room's and must not be dropped with it. Measured: cut objects' mean IoU 0.73, all objects
-    0.81; with the holes judged as one (the code before) 0.67 and 0.74, one object at 0.31."""
+    0.81; with the holes judged as one region 0.67 and 0.74, one object at 0.31."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
@@ -130,8 +133,8 @@ def test_a_glass_rising_above_the_tables_far_edge_keeps_its_outline(synth_set):
 
 def test_an_outline_with_a_narrow_opening_is_filled_but_not_the_table_between_objects():
     """Holes trace a glass's outline but thin out in one place: a hole filling leaks through
-    that opening, so the see-through inside (smooth table readings) was left out and the glass
-    came in pieces. Nearly closed gaps are filled; the table boxed in by two objects through
+    that opening, so the see-through inside (smooth table readings) would be left out and the
+    glass come in pieces. Nearly closed gaps are filled; the table boxed in by two objects through
     wide openings is not."""
     from sr3d_cli.segment.training_free import find_candidates
 
@@ -195,13 +198,14 @@ def test_a_vial_against_a_glass_is_split_by_the_readings_but_a_goblet_or_bottle_
         assert len(split_touching(ids > 0, K, plane, depth=sparse(depth))) == 1
 
 
-@pytest.mark.parametrize("aside, ahead", [(0.05, -0.04), (0.045, -0.05)])
+@pytest.mark.parametrize("aside, ahead", [(0.05, -0.04),
+                                          pytest.param(0.045, -0.05, marks=pytest.mark.slow)])
 def test_a_small_vial_against_a_tall_bottle_is_split_by_its_own_readings(aside, ahead, monkeypatch):
     """A 5.5 cm vial in front of a 26 cm bottle's side: one region, of which the vial is under
     4%, so it gets fewer than 30 of the region's 400 sampled readings and the parts cannot gain
     a quarter of the whole's count. Its own readings can still tell: the whole's fit misses
     them and the vial's fit holds them (``OWN_READINGS``). The bottle's neck, a thin part too,
-    stays with the bottle (it was left to neither part: bottle IoU .885)."""
+    stays with the bottle (left to neither part, the bottle's IoU would be .885)."""
     from sr3d_cli.segment import training_free
     from sr3d_cli.segment.training_free import split_touching
 
@@ -221,14 +225,15 @@ def test_a_small_vial_against_a_tall_bottle_is_split_by_its_own_readings(aside, 
     assert len(split_touching(region, K, plane, depth=sparse)) == 1
 
 
+@pytest.mark.slow
 def test_a_goblet_and_a_glass_whose_union_draws_a_lying_goblet_are_split_by_readings_above_it(
         tmp_path):
     """Generated frame (seed 4700, frame 0): a 16 cm goblet seen from above and a 9 cm glass
     beside it, their true masks closed into one region. The union draws a lying goblet (the
     glass its foot) 11 cm high at least as well as the two parts' fits draw theirs, and few
     readings lie on any surface, so neither the outline nor the count of readings on the fits
-    splits it (IoUs .65 / .35 before); but 30% of the goblet part's readings stand above that
-    lying fit's top and none above either part's."""
+    splits it (IoUs .65 / .35 by those alone); but 30% of the goblet part's readings stand
+    above that lying fit's top and none above either part's."""
     from sr3d_cli.segment.training_free import _disk, split_touching
 
     _, frame, gt = generated_frame(tmp_path, 4700, 0)
@@ -242,14 +247,15 @@ def test_a_goblet_and_a_glass_whose_union_draws_a_lying_goblet_are_split_by_read
     assert min(ious.values()) > 0.95
 
 
+@pytest.mark.slow
 def test_a_goblet_and_a_beaker_are_split_where_their_readings_stand_not_at_the_foot(
         tmp_path, monkeypatch):
     """Generated frame (seed 4500, frame 23): a 15 cm goblet and a 10 cm beaker touching, one
     region no solid draws well (IoU .71). Cutting the goblet's foot from the rest holds by the
     outline (.91); the cut between the two groups of readings on the table gives parts that
     fit (.98, .86) and hold 30% and 32% of their own readings more than the whole's fit: short
-    of OWN_READINGS, enough with the outline's gain, and a cut the readings hold wins (before:
-    the foot cut won, IoUs .36 / .52)."""
+    of OWN_READINGS, enough with the outline's gain, and a cut the readings hold wins (the
+    foot cut would give IoUs .36 / .52)."""
     from sr3d_cli.segment import training_free
 
     _, frame, gt = generated_frame(tmp_path, 4500, 23)
@@ -263,6 +269,7 @@ def test_a_goblet_and_a_beaker_are_split_where_their_readings_stand_not_at_the_f
     assert max(ious()) < 0.6
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rule, value, worst", [(None, None, 0.8),
                                                 ("OUTLINE_OWN_READINGS", 0.5, 0.5),
                                                 ("OUTLINE_REFUTED", 1.0, 0.7)])
@@ -316,7 +323,7 @@ def test_a_glass_partly_hidden_behind_another_is_split_from_it(behind, aside):
     no neck between them. The part behind, fitted alone, stands where the front glass's outline
     crosses it and its readings miss it; fitted with the front part's pixels as hidden, it
     reaches down behind it, lies behind the front part's fit, and the readings on both parts
-    hold the cut. Before, 3 of these 4 stayed one region and the fourth split at IoU .88/.92."""
+    hold the cut (fitted without the hidden pixels, 3 of these 4 stay one region)."""
     from sr3d_cli.segment.training_free import split_touching
 
     ids, K, plane, depth = solids_on_table([(GLASS, 0.1, 0.0, -0.03),
@@ -329,6 +336,7 @@ def test_a_glass_partly_hidden_behind_another_is_split_from_it(behind, aside):
     assert min(ious.values()) > 0.89
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed, index, clear", [(6700, 12, False), (6700, 7, True),
                                                 (4300, 8, False)])
 def test_a_small_object_or_one_no_solid_draws_with_its_neighbour_is_split(
@@ -337,11 +345,11 @@ def test_a_small_object_or_one_no_solid_draws_with_its_neighbour_is_split(
     region; the vial's evidence is one body, the goblet's covers only part of the goblet, so
     the cut between the bodies leaves much of the goblet out (that part's fit draws it at
     about .65), and the vial's part is under a fifth of the region: the vial's body cut from
-    all the rest splits them (vial IoU .13 -> .93). 6700/7: a goblet and a lying beaker behind
-    it, one region no solid draws (about .79); cut, both parts fit (about .92), but the goblet
-    part's fit holds fewer of its own readings than the whole's: the outline's clear gain
-    holds the cut all the same (without it, an object below .7). 4300/8: the same kinds of
-    frame. Before this, the worst object of each: .13, .30, .13; now every one above .89."""
+    all the rest splits them (vial IoU .93; .13 by the cut between bodies). 6700/7: a goblet
+    and a lying beaker behind it, one region no solid draws (about .79); cut, both parts fit
+    (about .92), but the goblet part's fit holds fewer of its own readings than the whole's:
+    the outline's clear gain holds the cut all the same (without it, an object below .7).
+    4300/8: the same kinds of frame. Every object of the three is segmented above .89."""
     from sr3d_cli.segment import training_free
 
     _, frame, gt = generated_frame(tmp_path, seed, index)
@@ -351,14 +359,15 @@ def test_a_small_object_or_one_no_solid_draws_with_its_neighbour_is_split(
         assert min(_segmented_ious(frame, gt).values()) < 0.7
 
 
+@pytest.mark.slow
 def test_a_standing_bottle_a_lying_one_leans_on_is_split_from_it(tmp_path):
     """Generated frame (seed 7100, frame 5, drawn by GL where there is one; the numpy
     renderer's frame splits either way): a lying bottle whose neck rests on a standing one, one
     region no solid draws (IoU .82). Cut, the parts are drawn at .84 and .99, but the standing
     bottle's readings scatter 20 mm either side of its surface, and a fit of the whole (a lying
     bottle 38 cm long) holds more of them than the part's own fit: .44 against .32. The
-    outline's clear gain holds the cut with one part under SPLIT_PART_IOU too (before: IoUs
-    .45 / .53)."""
+    outline's clear gain holds the cut with one part under SPLIT_PART_IOU too (without that:
+    IoUs .45 / .53)."""
     _, frame, gt = generated_frame(tmp_path, 7100, 5, renderer="auto")
     assert min(_segmented_ious(frame, gt).values()) > 0.9
 
@@ -396,7 +405,9 @@ def _evidence(ids: np.ndarray, holes: int = 60, seed: int = 0) -> np.ndarray:
     return (ids > 0) & (punched == 0)
 
 
-@pytest.mark.parametrize("gap,behind", [(0.055, 0.0), (0.055, 0.03), (0.06, 0.0)])
+@pytest.mark.parametrize("gap,behind", [(0.055, 0.0),
+                                        pytest.param(0.055, 0.03, marks=pytest.mark.slow),
+                                        pytest.param(0.06, 0.0, marks=pytest.mark.slow)])
 def test_two_glasses_a_few_pixels_apart_are_split_along_their_own_evidence(gap, behind):
     """Two straight glasses side by side, a few pixels apart: the candidates' closing fills the
     gap along its whole length, so their region has no neck, and the outline alone keeps one

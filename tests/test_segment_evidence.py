@@ -219,7 +219,7 @@ def test_instances_preview_labels_each_instance_with_its_score():
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
     per true object mean 0.23, false instances (>= 300 px, IoU < 0.2 with every object) 0.91 per
-    frame, from 7.6 per frame and a mean IoU of 0.26 with every instance kept."""
+    frame (7.6 per frame, and a mean IoU of 0.26, with every instance kept)."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 

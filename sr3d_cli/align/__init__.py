@@ -260,7 +260,7 @@ class Aligner:
         a robust median of their ratio, iterated. Glass gives few such readings (most are holes
         or see-through); with fewer than ``depth_min_share`` of the mask, nothing changes.
 
-        When the contact edge was wrong (hidden behind another object, or the height of a
+        When the contact edge is wrong (hidden behind another object, or the height of a
         bottle seen from above), the model can be 10-20% too far; then no reading lies near it.
         So first the factors within ``depth_search`` vote (readings more than ``depth_inlier``
         above the table only: see-through readings on the table would vote for "farther"); a

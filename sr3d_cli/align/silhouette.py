@@ -58,7 +58,7 @@ def fill_silhouette(uv: np.ndarray, faces: np.ndarray, shape: tuple[int, int],
 
     Triangles are filled one by one: a single ``cv2.fillPoly`` call treats overlapping
     polygons as holes (even-odd rule). Either half of a closed mesh covers its silhouette; the
-    far half is drawn (the pose search was tuned with it)."""
+    far half is drawn (the pose search's constants assume it)."""
     pix = (uv - np.asarray(origin)) * zoom
     tri = pix[faces]
     tri = tri[np.isfinite(tri).all(axis=(1, 2)) & ~_facing(tri)]

@@ -6,6 +6,7 @@ import click
 
 from sr3d_cli import __version__
 from sr3d_cli.cli.align import align
+from sr3d_cli.cli.config_cmd import config
 from sr3d_cli.cli.evaluate import evaluate
 from sr3d_cli.cli.grasp import grasp
 from sr3d_cli.cli.html_report import report
@@ -50,6 +51,7 @@ cli.add_command(grasp)
 cli.add_command(evaluate)
 cli.add_command(import_bag)
 cli.add_command(report)
+cli.add_command(config)
 
 
 def main() -> None:

@@ -20,7 +20,12 @@ from sr3d_cli.cli.stage_loop import batch_options, run_frames
 @scene_options
 @common_options
 def align(scene, mode, masks, bop, batch, out, frames, fmt):
-    """Write poses/<frame>.json: T_cam_obj, scale, view and silhouette scores, diagnostics."""
+    """Write poses/<frame>.json: T_cam_obj, scale, view and silhouette scores, diagnostics.
+
+    \b
+    Example:
+      sr3d align sample_data/scene_0000 --masks gt
+    """
     from sr3d_cli.align import Aligner
     from sr3d_cli.errors import FrameFailed
     from sr3d_cli.io.atomic import write_json

@@ -102,6 +102,10 @@ def evaluate(scene, preds, only_valid, mask_source, protocol, resolution, plot, 
 
     Writes metrics.json and metrics.csv (to --out, else SCENE) and prints the mean table.
     With --grasps, scores grasps instead (needs gt/objects: true meshes and poses).
+
+    \b
+    Example:
+      sr3d evaluate sample_data --pred depth --pred repaired --plot
     """
     if grasps:
         return _evaluate_grasps(scene, out, frames, fmt, contacts or "grid")

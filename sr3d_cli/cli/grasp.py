@@ -27,7 +27,12 @@ def grasp(scene, only, depth_source, masks, hand_poses, preview, batch, out, fra
     """Propose 6-DoF parallel-jaw grasps per object: writes grasps/<frame>.json and .npy
     (graspnetAPI's 17 numbers per grasp). Needs masks/ and, unless --from raw, repaired/ and
     poses/ (run `sr3d repair-depth` first). A frame with objects and no grasp fails (exit 1);
-    its grasps file says why."""
+    its grasps file says why.
+
+    \b
+    Example:
+      sr3d grasp sample_data/scene_0000 --preview
+    """
     from sr3d_cli.errors import FrameFailed
     from sr3d_cli.grasp.planner import Planner
     from sr3d_cli.pipeline import Pipeline

@@ -27,7 +27,12 @@ def report(scenes, output, out, fmt, title, rerun_path):
     """Write one HTML page for the frames of SCENE...: the metrics of `sr3d evaluate`
     (sortable, worst frames first), each frame's previews and error maps, time per command and
     stage (from log/<frame>.json) and failures with their reasons. Pictures are embedded, so
-    the page is one file. With --rerun, also a Rerun recording to open with `rerun FILE.rrd`."""
+    the page is one file. With --rerun, also a Rerun recording to open with `rerun FILE.rrd`.
+
+    \b
+    Example:
+      sr3d report sample_data --out build/demo/sample_data -o report.html
+    """
     from sr3d_cli.cli.batch import open_scenes
     from sr3d_cli.io.atomic import write_text
     from sr3d_cli.io.html_report import gather, render

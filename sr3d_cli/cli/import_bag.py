@@ -33,6 +33,10 @@ def import_bag(bag, out, every, start, end, limit, colour_topic, depth_topic, in
     BAG is a ROS 1 .bag, a ROS 2 bag folder, or the .db3 / .mcap file inside one; topics are
     found as the RealSense ROS 1 / ROS 2 drivers and the RealSense Viewer name them. Needs the
     bag extra (rosbags).
+
+    \b
+    Example:
+      sr3d import-bag capture.bag scenes/desk --every 5
     """
     from pathlib import Path
 

@@ -41,7 +41,7 @@ def common_options(func):
     """``--config``, ``--set``, ``-v``, ``-q``, ``--report``: every command."""
 
     @click.option("--config", "config_path", type=click.Path(dir_okay=False),
-                  help="YAML config (every key: configs/default.yaml).")
+                  help="YAML config (every key and its default: sr3d config).")
     @click.option("--set", "sets", multiple=True, metavar="SECTION.KEY=VALUE",
                   help="Override one config key; repeatable. Flags still win.")
     @click.option("-v", "--verbose", count=True, help="More messages; -v shows tracebacks.")

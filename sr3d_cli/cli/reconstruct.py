@@ -21,7 +21,12 @@ from sr3d_cli.errors import FrameFailed, InputError
 @scene_options
 @common_options
 def reconstruct(scene, backend, masks, library, batch, out, frames, fmt):
-    """Write meshes/<frame>/<k>.ply (object frame: base centre, +z up the axis, height 1)."""
+    """Write meshes/<frame>/<k>.ply (object frame: base centre, +z up the axis, height 1).
+
+    \b
+    Example:
+      sr3d reconstruct sample_data/scene_0000 --frames 000000
+    """
     from sr3d_cli.reconstruct import Reconstructor
     from sr3d_cli.stages import reconstruct_frame, stage_record, stale
 

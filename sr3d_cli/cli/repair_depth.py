@@ -32,7 +32,12 @@ def repair_depth(scene, npy, ply, preview, masks, redo, batch, out, frames, fmt)
     A stage output is stale when the config keys it depends on or its upstream files changed
     since it was made; --keep-stale keeps such outputs (with a warning), --redo STAGE makes
     that stage and the later ones again. A frame with objects of which none could be placed
-    fails (exit 1); its repaired depth is then the raw one."""
+    fails (exit 1); its repaired depth is then the raw one.
+
+    \b
+    Example:
+      sr3d repair-depth sample_data --preview --workers 2
+    """
     from sr3d_cli.io import preview as previews
     from sr3d_cli.io.atomic import write_bytes, write_npy, write_png
     from sr3d_cli.io.images import write_depth

@@ -19,7 +19,12 @@ from sr3d_cli.cli.report import Report
 @click.option("--overwrite", is_flag=True, help="Regenerate scenes that already exist.")
 @common_options
 def synth(out, scenes, views, seed, overwrite):
-    """Generate synthetic glassware scenes with full ground truth into OUT/scene_NNNN/."""
+    """Generate synthetic glassware scenes with full ground truth into OUT/scene_NNNN/.
+
+    \b
+    Example:
+      sr3d synth build/synth --scenes 20 --seed 7
+    """
     from sr3d_cli.render import make_renderer
     from sr3d_cli.synth.generate import write_scene
 

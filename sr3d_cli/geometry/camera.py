@@ -9,7 +9,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Camera:
-    """Intrinsics of one capture session.
+    """Intrinsics of one camera (one scene folder).
 
     K : (3, 3) float64 pixel intrinsics, pixel centres at integer coordinates.
     width, height : image size in pixels the intrinsics belong to (0 = not known yet).

@@ -110,9 +110,9 @@ def silhouette(centres: np.ndarray, axis: np.ndarray, radii: np.ndarray, K: np.n
     The fill takes in every pixel its outline touches, so a row comes out about one pixel wider
     than the pixels whose centres the solid covers (half a pixel each side). The fit is tuned
     to that: the training-free segmenter's masks run 0.8 px past the true outline on each side
-    (the sensor's holes spill over the edge), so the two nearly agree. An exact fill was
-    measured worse on the generated study seeds (grasp top-1 and depth MAE with the segmenter's
-    masks); change one only with the other.
+    (the sensor's holes spill over the edge), so the two nearly agree. An exact fill scores
+    worse with the segmenter's masks (grasp top-1 and depth MAE); change one only with the
+    other.
     """
     axis = np.asarray(axis, dtype=np.float64)
     helper = np.array([1.0, 0, 0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])

@@ -133,7 +133,7 @@ EXACT_POOL = 3   # times top_k grasps the rescoring may reach into (Planner._obj
 THIN_PAIR = 3.0  # a pair shorter than this many pair radii spans a thin wall (Planner._frames)
 LATE_REDRAWS = 1  # redraws of a later rung for an object with failing grasps (Planner.brief)
 SURE = 1e-5  # m, kept from a box's faces where a test on other coordinates must agree
-CHUNK = 96  # frames tried at once (Planner._try_frames): 48 was ~7% slower, 192 no faster
+CHUNK = 96  # frames tried at once (Planner._try_frames): 48 is ~7% slower, 192 no faster
 
 
 RUN_TOLERANCE = 0.001  # m: a section this near a run's line continues it (Sections.margin)
@@ -281,8 +281,7 @@ class Planner:
         """This planner with its opening and collision margins times ``tight_margins``, for
         an object where nothing holds with them: one nearly as wide as the opening (a lying
         beaker 75.5 mm across, in the 80 mm opening less 2 x 4 mm) is better tried tight than
-        not at all (study seed 5900 frame 0, 4 draws: held 0 -> 4 from the true masks, 0 -> 2
-        with sr3d's; the 8 other objects without a grasp on seeds 4900-5900 stayed so)."""
+        not at all."""
         f = self.cfg.tight_margins
         return Planner(replace(self.cfg, width_margin=f * self.cfg.width_margin,
                                collision_margin=f * self.cfg.collision_margin))
@@ -291,15 +290,14 @@ class Planner:
         """This planner accepting contacts up to ``fallback_friction``, for an object nothing
         holds on at ``friction`` even with tight margins: the model's contacts are a few
         degrees off the true ones, and the best grasp there is beats none (a lying beaker
-        wider than the opening, pinched at its mouth: the model's rim needs 0.6-2, the true
-        one 0.27 and 0.24; study seeds 10900 frame 6, 11500 frame 16)."""
+        wider than the opening, pinched at its mouth, can need 0.6-2 on the model's rim and
+        under 0.3 on the true one)."""
         return Planner(replace(self.cfg, friction=self.cfg.fallback_friction))
 
     def brief(self) -> "Planner":
         """This planner with at most one redraw (``LATE_REDRAWS``), for the later rungs of the
         ladder where an object already has grasps that fail on its model: with all of them
-        the ladder doubled the grasp stage's time on frames with such objects (seed 700 frame
-        8: 1.55 -> 4.2 s)."""
+        the ladder would double the grasp stage's time on frames with such objects."""
         return Planner(replace(self.cfg, redraws=min(self.cfg.redraws, LATE_REDRAWS)))
 
     # -- one object -----------------------------------------------------------------------------
@@ -370,22 +368,16 @@ class Planner:
         ``depth``) reaches within ``end_band`` of the object's top end (``end``: the model's
         height axis, base to top, and the top's coordinate along it): a rim's lip or a neck's
         flare, a few millimetres the outline cannot show, stands there, and a pad on it
-        slips (study seeds 1500, 1700, 1900, 4 draws, top-1 by the grid, sr3d's fits from the
-        true masks / whole pipeline: .809/.745, .875/.840, .835/.798 -> .830/.761,
-        .880/.870, .883/.862; by exact pads and by GraspNet's line at most .011 lower).
+        slips.
 
         With the placed model's ``sections``, a grasp whose jaws close around its axis (not a
         pinch across one wall, :func:`_across_wall`) has for centre term how far its fingers
         stay from the ends of their straight run (:meth:`Sections.margin`), in ``run_scale``
         (1 from there on): half the height is the wrong place on a goblet, where it lies in
         the bowl and draws stem grasps to just under the junction, which a carved model often
-        puts 10-55 mm too high (study seeds 6300-8300, 9 x 24 frames, 4 draws, grasps planned
-        again on sr3d's fits: held 1458 -> 1482 of 1756; standing goblets .660 -> .684,
-        flasks .840 -> .855). A run ending under a wider part counts as ending
-        ``junction_drop`` lower, as the junction of a carved goblet errs upwards: 7 of 31
-        standing goblets 11-22 mm too high, 1 17 mm too low, the median 0 (seeds 10900-11500,
-        grasp stage again on the same fits, 4 draws: 634 -> 638 of 720; 11700 and 11900:
-        336 -> 338 of 384)."""
+        puts 10-55 mm too high. A run ending under a wider part counts as ending
+        ``junction_drop`` lower, as the junction of a carved goblet errs upwards (its median
+        error is 0, but about one in four sits 11-22 mm too high)."""
         cfg = self.cfg
         approach_up = np.clip(R[:, :, 0] @ -plane.normal, 0, 1)
         centred = 1 - 2 * np.abs(np.clip(plane.height(centre) / top, 0, 1) - 0.5)
@@ -417,8 +409,7 @@ class Planner:
         normal), and the worst counts:
         a fitted model's height is off by a few millimetres, and a grasp that holds only at its
         exact height (fingertips on a flask's shoulder, a pad on a beaker's lip) fails on the
-        true object (study seed 1500, sr3d's fits from the true masks, 4 draws: top-1 .782 ->
-        .824). Of a pinch across one wall (jaws that do not close around the model's axis,
+        true object. Of a pinch across one wall (jaws that do not close around the model's axis,
         through ``sections.origin``: :func:`_across_wall`), the contacts are also found with
         the grasp turned ``tilt_tolerance`` degrees either way (:meth:`_tilts`). Best first,
         until the best is one scored so (each costs up to three ray casts, five with the

@@ -171,12 +171,11 @@ def unseen_mouth(fit: RevolutionFit, cfg: ReconstructConfig) -> trimesh.Trimesh 
     """A lying ``fit`` (kept closed) opened at its wider end, if that end can be a mouth
     (:func:`mouths`), as a mesh in ``fit``'s object frame; else None. A lying vessel's wider
     end is its mouth (a beaker's lip, a tumbler's taper), and a lying fit's base is its wider
-    end: on study seeds 2900 and 3100, 19 of 20 lying fits of glasses, beakers and goblets had
-    their base at the true mouth. The readings seldom show whether an end is open, even one
-    facing the camera (:func:`open_mouth` kept 6 of 8 such mouths shut, one looked into from
-    34 degrees), so the end is taken whichever way it faces. A beaker lying there, wider than
-    the gripper's opening, can only be held by its rim; the grasp stage plans on this model
-    where the closed one gives no grasp."""
+    end (19 of 20 lying fits of glasses, beakers and goblets have their base at the true mouth).
+    The readings seldom show whether an end is open, even one facing the camera
+    (:func:`open_mouth` keeps most such mouths shut), so the end is taken whichever way it
+    faces. A beaker lying there, wider than the gripper's opening, can only be held by its rim;
+    the grasp stage plans on this model where the closed one gives no grasp."""
     if fit.resting != "lying":
         return None
     wider = [m for m in mouths(fit, cfg) if m.axis @ fit.axis < 0]  # opened at the base end

@@ -85,7 +85,7 @@ class DensityGridModel:
         self.cfg = cfg
         self.model = OnnxModel(cfg.onnx_model, "reconstruction",
                                {"*": (1, 3, None, None)}, {"*": (1, None, None, None)})
-        shape = self.model.session.get_inputs()[0].shape
+        shape = self.model.runtime.get_inputs()[0].shape
         self.size = shape[2] if isinstance(shape[2], int) else 256
 
     def __call__(self, rgb, mask) -> trimesh.Trimesh:

@@ -263,12 +263,11 @@ def straightened(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, rise: floa
     largest radius, than at a level below) with its hidden levels between shown ones widened
     towards the straight line between those, as far as the outline keeps its IoU (within
     ``loss``): seen from above, a flask's base covers its cone, which the width update leaves
-    dented (up to 12 mm narrow at mid-height; standing flasks fitted to the true masks of
-    study seeds 1500, 1700, 1900: mean radius error 1.83, 2.16, 1.93 mm -> 1.40, 1.46, 1.42).
-    Applied to the chosen fit only: the raw readings that decide standing from lying were
-    found on the dented surface (seed 700 frame 4: a straightened flask lost its vote to a
-    lying fit), and on lying fits it cost grasps and fixed none. ``occluders``: see
-    :class:`_Frame`."""
+    dented (up to 12 mm narrow at mid-height; straightening cuts a standing flask's mean
+    radius error by about a quarter). Applied to the chosen fit only: the raw readings that
+    decide standing from lying are counted on the fitted, dented surface, where a straightened
+    flask can lose its vote to a lying fit; lying fits are left as they are (straightening them
+    loses grasps). ``occluders``: see :class:`_Frame`."""
     if fit.resting != "standing":
         return fit
     radii = fit.profile[1:-1, 0] * fit.height
@@ -321,8 +320,8 @@ def _fill_hidden(radii: np.ndarray, hidden: np.ndarray) -> np.ndarray:
     """Radii with no ``hidden`` level (one narrower than the silhouette where it is drawn:
     another part covers it) pinched below the nearest shown levels on both sides of it. The
     outline says nothing about a hidden level, and the width-ratio update carries it along
-    with whatever covers it (seed 900 frame 17: a flask's neck seen from above pinched to a
-    tenth of its width). A goblet's stem stays thin: a shown part of it is nearest."""
+    with whatever covers it (a flask's neck seen from above can pinch to a tenth of its
+    width). A goblet's stem stays thin: a shown part of it is nearest."""
     shown = np.nonzero(~hidden)[0]
     if len(shown) == 0 or len(shown) == len(radii):
         return radii
@@ -338,7 +337,7 @@ def _resting_tilt(z: np.ndarray, r: np.ndarray) -> tuple[float, float]:
     """How a body of revolution lies on a table: on the side of its profile's convex hull
     (:func:`hull_sides`) whose span along the axis holds the centre of mass (of the solid,
     weight r^2); a goblet rests on its foot's rim and its cup, tilted. On fitted, noisy
-    profiles this beats the exact rule of :func:`resting_edge` (bench frame 11: 2.3 vs 2.6 mm).
+    profiles this places the object with less error than the exact rule of :func:`resting_edge`.
     z (L,) increasing along the axis from the base, r (L,) radii (metres). Returns the axis's
     rise towards +z (radians) and the axis's height at z = 0 above the table.
     """
@@ -455,23 +454,19 @@ def straight_walls(fit: RevolutionFit, max_deg: float) -> RevolutionFit:
     """A ``fit`` whose levels within :data:`STRAIGHT_SPAN` of its height lie on one
     line (within :data:`STRAIGHT_BEND`) leaning less than ``max_deg`` from its axis, with
     those levels set to their median radius: a wall that upright (a beaker's) is read as
-    upright. The fit leans such walls outwards by half a degree or more (standing beakers of
-    study seeds 1500/1700/1900, slope over 10-85% of the height from the true masks, median
-    +.55 deg, 8 of 11 above +.4; from sr3d's masks +.76, up to +2.8), and a pinch across a thin
-    wall, whose pads span up to 40 mm of it, holds only within about 1.5 deg. Levels above
+    upright. The fit leans such walls outwards by half a degree or more (up to about 3 deg
+    from sr3d's own masks), and a pinch across a thin wall, whose pads span up to 40 mm of it,
+    holds only within about 1.5 deg. Levels above
     the span wider than the wall, but the top one, are set to it too: a beaker's 3 mm lip is one
     level, which the fit and :func:`smoothed` spread over the levels below as a wall flaring
     outwards over its top 10-15 mm, and a pinch across the rim closed at that slant holds on
-    the model but not on the true, upright wall (study seed 5700, frame 8, from the true masks:
-    the true wall upright to 3 mm below the rim, the fit's 1.7 mm wider over the top 13.5 mm;
-    the best pinches, slanted 7-9 deg, needed friction 3.1 on the true beaker). The span ends
-    at 85% of the height, as the lip's spread reaches down to 87-90% (0.9 left 5 of 15
-    standing beakers of seeds 5700-6100 unstraightened, 1.1-1.9 mm off their line there).
+    the model but not on the true, upright wall (pinches slanted 7-9 deg by a lip spread
+    1.7 mm wide can need friction 3 on the true beaker). The span ends at 85% of the height,
+    as the lip's spread reaches down to 87-90% of it (a span to 90% leaves a third of the
+    beakers unstraightened, 1-2 mm off their line there).
     The top level (the lip) and the base are left as fitted. A lying fit is read the same way
     over the middle 15-85% of its length, and either end may be its mouth: a lying beaker's lip
-    is spread the same way (seed 5700 frame 7: 48.7 -> 47.7 mm over its first 10 mm, the true
-    wall 47.9 to 4 mm from the lip; fresh seeds 6100 and 6300 from the true masks, 4 draws:
-    310 -> 315 of 356 object-draws held, none fewer; with sr3d's masks 288 -> 287).
+    is spread the same way.
     ``max_deg`` 0 returns the fit unchanged."""
     if max_deg <= 0:
         return fit
@@ -514,8 +509,8 @@ def carved(fit: RevolutionFit, mask: np.ndarray, depth: np.ndarray, K: np.ndarra
     ``depth`` (H, W) metres shows empty thinned to a stem (:data:`STEM_SHARE` of the widest
     radius). Seen steeply from above, a goblet's bowl covers its stem, and the outline (a bowl
     over a foot) is fitted as well by a cylinder as wide as the bowl, which the width update
-    makes (goblets of study seeds 3300 and 3500 came out 10-21 mm too wide there, and grasps
-    planned on that wall or on the rim above it failed on the true goblet). The readings tell
+    makes (10-21 mm too wide at the stem, where grasps planned on that wall or on the rim
+    above it fail on the true goblet). The readings tell
     them apart: glass gives front-surface returns as well as see-through ones, and of the rays
     that meet a made-up wall, none returns from anywhere inside it. A level is empty when,
     pooled over :data:`CARVE_WINDOW` levels, at least :data:`CARVE_READINGS` readings' rays
@@ -528,9 +523,8 @@ def carved(fit: RevolutionFit, mask: np.ndarray, depth: np.ndarray, K: np.ndarra
     bowl only where its underside turns towards the camera (a flatter one, met at a grazing
     angle, returns nothing), often well above the stem's top: below the lowest level where
     :data:`BOWL_READINGS` of them find it, the bowl narrows into the stem at 45 degrees from
-    their median radius there, not as a flat floor on the stem (the 25 standing goblets the
-    carve cut on study seeds 6300-8300, true masks: the stem's top 17.5 mm off on average
-    and 14 of them more than 10 mm too high; with the cone 12.4 mm and 7)."""
+    their median radius there, not as a flat floor on the stem, which would put the stem's
+    top too high (by 17 mm on average against 12 mm with the cone)."""
     if fit.resting != "standing":
         return fit
     ys, xs = np.nonzero(mask & (depth > 0))
@@ -871,18 +865,18 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
     if its IoU is within ``tilt_tolerance`` of the flat one's.
     Seen from above, an open vessel's rim ellipse covers its upper levels, and the outline fits
     a taller vessel curling inward at the top about as well as the true straight one (a 7 cm
-    beaker looked down on from 56 degrees above the table came out 30% too tall). A standing
+    beaker looked down on from 56 degrees above the table can come out 30% too tall). A standing
     fit whose top levels are hidden is refitted with them as wide as the highest level shown
     (:func:`_straight_top`); that fit is kept if its IoU is within ``straight_top_gap`` of
     the free one's (a 10% lip makes the curled fit draw the outline up to 0.5% better) and
     the readings do not refute it (a squat box with a lid, not a solid of
-    revolution, came out 2.3 cm tall under readings up to 8 cm).
+    revolution, would come out 2.3 cm tall under readings up to 8 cm).
     ``openings`` gives the open vessels a fit may be rendered as (its mouth ends opened); the
     readings a hypothesis explains are then the most any of its closed and open forms does:
     looked down into, an open beaker shows its floor and inner wall, which a closed model's lid
-    hides, and a short lying solid in front of them took more of its readings than the lidded
-    standing one (seed-1500 study: a 12.6 cm beaker laid down, 29 readings against the lying
-    fit's 70; opened, 214). A standing winner's hidden levels are then straightened where its
+    hides, and a short lying solid in front of them can take more of its readings than the
+    lidded standing one (a 12.6 cm beaker: 29 readings on the lidded model, 70 on a lying fit,
+    214 opened). A standing winner's hidden levels are then straightened where its
     profile only narrows upwards (:func:`straightened`).
     A lying fit starts along the outline's major axis, turning as its orientation says; with
     ``square_starts``, a near-square outline (elongation below :data:`SQUARE_OUTLINE`) that no

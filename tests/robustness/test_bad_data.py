@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -123,6 +124,7 @@ def _outputs(root: Path) -> dict[str, bytes]:
             if p.is_file() and ".tmp" not in p.name and p.parent.name != "log"}
 
 
+@pytest.mark.slow
 def test_killed_run_resumes_with_skip_existing_and_matches_a_clean_run(synth_set, tmp_path):
     """Run a batch, kill it mid-way, rerun with --skip-existing: every output file is whole and
     byte-identical to a clean run's."""

@@ -153,6 +153,7 @@ def _outputs(root: Path) -> dict[str, bytes]:
             if p.is_file()}
 
 
+@pytest.mark.slow
 def test_ctrl_c_with_workers_exits_130_cleanly(small_scenes, tmp_path):
     src = tmp_path / "data"
     for i in range(2):
