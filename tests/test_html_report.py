@@ -30,7 +30,7 @@ def _run(*args):
 def batch(tmp_path_factory) -> Path:
     """Four frames: repaired depth exact (000000), 5 cm off on the object (000001), the raw
     depth with its holes (000002); 000003's depth file is broken, so every command fails it.
-    grasp writes the run logs; evaluate --plot the metrics and error maps."""
+    segment writes the run logs; evaluate --plot the metrics and error maps."""
     root = make_native_scene(tmp_path_factory.mktemp("rep") / "scene", 4)
     for k in range(3):
         fid = f"{k:06d}"
@@ -44,7 +44,7 @@ def batch(tmp_path_factory) -> Path:
         write_png(root / "repaired" / f"{fid}_preview.png",
                   preview.preview_image(rgb, raw, repaired, ids))
     (root / "depth" / "000003.png").write_bytes(b"not a png")
-    assert _run("grasp", root, "-q").exit_code == 1
+    assert _run("segment", root, "-q").exit_code == 1
     assert _run("evaluate", root, "--pred", "repaired", "--pred", "depth", "--plot",
                 "-q").exit_code == 1
     return root
@@ -114,7 +114,7 @@ def test_report_ranks_frames_worst_first_with_pictures_times_and_failures(batch,
     header, *rows = page.tables["frames"]
     assert header[:3] == ["rank", "frame", "repaired RMSE (m)"]
     assert [r[1] for r in rows] == ["000003", "000002", "000001", "000000"]
-    assert rows[0][-1] == "failed: grasp"
+    assert rows[0][-1] == "failed: segment"
     rmse = [float(r[2]) for r in rows[1:]]
     assert rmse[1] == pytest.approx(0.05, abs=1e-3) and rmse[2] == 0.0 and rmse[0] > 0.2
     # one picture per frame and kind: previews and both error maps, embedded as JPEG
@@ -126,8 +126,9 @@ def test_report_ranks_frames_worst_first_with_pictures_times_and_failures(batch,
         assert image is not None and image.shape[1] in (32, 96)
     assert all(link.startswith("#") for link in page.links)  # nothing outside the file
     times = {r[0]: r for r in page.tables["times"][1:]}
-    assert times["grasp"][1] == "4"
-    assert any("000003" in f and "grasp" in f and "depth/000003.png" in f for f in page.failures)
+    assert times["segment"][1] == "4"
+    assert any("000003" in f and "segment" in f and "depth/000003.png" in f
+               for f in page.failures)
     assert any("evaluate" in f and "000003" in f for f in page.failures)
     means = {r[0]: r for r in page.tables["means"][1:]}
     assert set(means) == {"repaired", "depth"} and means["repaired"][1] == "3"

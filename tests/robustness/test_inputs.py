@@ -293,11 +293,8 @@ def test_a_bad_library_mesh_is_named(tmp_path):
 def test_a_recording_of_random_bytes_is_a_usage_error(tmp_path):
     bag = tmp_path / "rec.bag"
     _random(bag)
-    from sr3d_cli.io.realsense import INSTALL_HINT, LIBUSB_HINT
-
     result = run("import-bag", bag, tmp_path / "out", "-q")
-    assert_clean(result, 2)
-    assert any(s in result.output for s in ("rec.bag", INSTALL_HINT, LIBUSB_HINT)), result.output
+    assert_clean(result, 2, "rec.bag")
 
 
 def test_masks_json_of_random_bytes_is_named(repaired_scene):
