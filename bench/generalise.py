@@ -46,8 +46,8 @@ def segmentation_scores(pred: np.ndarray, truth: np.ndarray) -> dict:
             pb = pred == b
             iou[i, j] = (ta & pb).sum() / max((ta | pb).sum(), 1)
     best = {a: float(iou[i].max()) if pred_ids else 0.0 for i, a in enumerate(true_ids)}
-    false = sum(1 for j, b in enumerate(pred_ids)
-                if (pred == b).sum() >= FALSE_AREA and (not true_ids or iou[:, j].max() < FALSE_IOU))
+    false = sum(1 for j, b in enumerate(pred_ids) if (pred == b).sum() >= FALSE_AREA
+                and (not true_ids or iou[:, j].max() < FALSE_IOU))
     return {"best_iou": best, "false": false}
 
 

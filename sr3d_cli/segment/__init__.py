@@ -100,7 +100,8 @@ def to_full_size(mask: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
 def read_prompts(path: Path, frame_id: str, kind: str = "boxes") -> list[list[float]]:
     """Prompts for a frame from a JSON file ``{frame_id: [...], ...}`` or a folder of
-    ``<frame_id>.json`` files holding such a list (or ``{"boxes": [...]}`` / ``{"points": [...]}``).
+    ``<frame_id>.json`` files holding such a list (or ``{"boxes": [...]}``, ``{"points":
+    [...]}``).
 
     kind : ``boxes`` (each ``[x0, y0, x1, y1]``) or ``points`` (each ``[x, y]``), pixels.
     A frame the file does not name has no prompts.
@@ -123,7 +124,6 @@ def read_prompts(path: Path, frame_id: str, kind: str = "boxes") -> list[list[fl
     if prompts.ndim != 2 or prompts.shape[1] != width or not np.isfinite(prompts).all():
         raise InputError(file, f"{kind} for frame {frame_id} must be a list of {layout} numbers")
     return prompts.tolist()
-
 
 
 def import_masks(folder: Path, frame_id: str, shape: tuple[int, int], label: str,

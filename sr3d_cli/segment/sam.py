@@ -6,9 +6,10 @@ exported beside it):
 - encoder: image ``(1, 3, 1024, 1024)`` float32, RGB normalised with ImageNet mean/std, longest
   side resized to 1024 and zero-padded bottom/right -> ``image_embeddings (1, 256, 64, 64)``;
 - decoder: ``image_embeddings``, ``point_coords (1, N, 2)`` in the resized frame,
-  ``point_labels (1, N)`` (foreground point 1, box corners 2 and 3, padding point -1), ``mask_input (1, 1, 256, 256)``,
-  ``has_mask_input (1,)``, ``orig_im_size (2,)`` -> ``masks (1, M, H, W)`` logits at the original
-  size, ``iou_predictions (1, M)``, ``low_res_masks``.
+  ``point_labels (1, N)`` (foreground point 1, box corners 2 and 3, padding point -1),
+  ``mask_input (1, 1, 256, 256)``, ``has_mask_input (1,)``, ``orig_im_size (2,)`` ->
+  ``masks (1, M, H, W)`` logits at the original size, ``iou_predictions (1, M)``,
+  ``low_res_masks``.
 """
 
 from __future__ import annotations

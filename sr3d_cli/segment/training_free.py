@@ -218,10 +218,11 @@ def outline_evidence(departure: np.ndarray, on_table: np.ndarray, level: float =
 def shows_outline(mask: np.ndarray, departure: np.ndarray) -> bool:
     """Whether an instance ``(H, W) bool`` has a visible outline: at least :data:`FAINT_SHARE`
     of the band 3 px either side of its edge departs from the table's colour by over
-    :data:`FAINT_COLOUR` (:func:`table_colour_departure`). A glass's rim, refraction edge or reflections always
-    show somewhere around it; a sensor's dropout on a plain cloth or wall shows the surface's
-    own colour all round (measured on the shared real and extsim frames: glass at least 0.05,
-    dropouts at most 0.012; a lying glass on a generated wood texture 0.022)."""
+    :data:`FAINT_COLOUR` (:func:`table_colour_departure`). A glass's rim, refraction edge or
+    reflections always show somewhere around it; a sensor's dropout on a plain cloth or wall
+    shows the surface's own colour all round (measured on the shared real and extsim frames:
+    glass at least 0.05, dropouts at most 0.012; a lying glass on a generated wood texture
+    0.022)."""
     inner = cv2.erode(mask.astype(np.uint8), _disk(3)) > 0
     band = (cv2.dilate(mask.astype(np.uint8), _disk(3)) > 0) & ~inner
     return bool((np.nan_to_num(departure[band], nan=0.0) > FAINT_COLOUR).mean() >= FAINT_SHARE)
