@@ -20,7 +20,7 @@ import numpy as np
 
 from sr3d_cli import stages
 from sr3d_cli.config import Config, IOConfig
-from sr3d_cli.evaluate import depth_metrics, mean_metrics
+from sr3d_cli.evaluate import depth_metrics, instance_ious, mean_metrics
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.io.images import write_depth
 from sr3d_cli.pipeline import Pipeline
@@ -37,17 +37,10 @@ def segmentation_scores(pred: np.ndarray, truth: np.ndarray) -> dict:
     """Each true object's best IoU ``{id: iou}`` with a predicted instance, and the predicted
     instances of at least :data:`FALSE_AREA` px whose IoU with every true object is below
     :data:`FALSE_IOU`. pred, truth : (H, W) int instance ids, 0 = background."""
-    true_ids = [int(v) for v in np.unique(truth) if v > 0]
-    pred_ids = [int(v) for v in np.unique(pred) if v > 0]
-    iou = np.zeros((len(true_ids), len(pred_ids)))
-    for i, a in enumerate(true_ids):
-        ta = truth == a
-        for j, b in enumerate(pred_ids):
-            pb = pred == b
-            iou[i, j] = (ta & pb).sum() / max((ta | pb).sum(), 1)
-    best = {a: float(iou[i].max()) if pred_ids else 0.0 for i, a in enumerate(true_ids)}
-    false = sum(1 for j, b in enumerate(pred_ids) if (pred == b).sum() >= FALSE_AREA
-                and (not true_ids or iou[:, j].max() < FALSE_IOU))
+    best = instance_ious(pred, truth)
+    against_truth = instance_ious(truth, pred)  # each instance's best IoU with a true object
+    false = sum(1 for b, iou in against_truth.items()
+                if iou < FALSE_IOU and (pred == b).sum() >= FALSE_AREA)
     return {"best_iou": best, "false": false}
 
 

@@ -27,8 +27,7 @@ The steps:
    whose colour replaces the table's (an opaque object: glass shows the table through itself,
    :func:`table_colour_departure`) and those with no outline in colour at all (a sensor's
    dropout on a plain surface, :func:`shows_outline`); each kept instance grown to its colour
-   outline
-   (:func:`grow_to_outline`), as a real glass's depth evidence covers only part of it.
+   outline (:func:`grow_to_outline`), as a real glass's depth evidence covers only part of it.
 """
 
 from __future__ import annotations
@@ -178,8 +177,7 @@ def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray,
                            window: int = COLOUR_WINDOW) -> np.ndarray:
     """How far each pixel's colour departs from the table's colour around it ``(H, W) float``,
     in units of the table's own spread (the 90th percentile of table pixels' departure, at
-    least :data:`LEAST_SPREAD`), NaN
-    where no table reading lies within ``window`` pixels.
+    least :data:`LEAST_SPREAD`), NaN where no table reading lies within ``window`` pixels.
 
     The table's local colour is the mean CIELAB colour of the pixels whose readings lie on the
     table, within the window. A transparent object shows the table through itself, so over
@@ -230,13 +228,14 @@ def shows_outline(mask: np.ndarray, departure: np.ndarray) -> bool:
 
 def opaque_objects(opaque: np.ndarray, departure: np.ndarray) -> np.ndarray:
     """The connected parts of opaque evidence ``(H, W) bool`` that are opaque by their colour
-    too (:func:`looks_opaque`). A real glass's front surface often returns smooth readings
+    too (the rule of :func:`looks_opaque`, per part). A real glass's front surface often returns smooth readings
     above the table, but shows the table's colour through itself."""
     count, labels = cv2.connectedComponents(opaque.astype(np.uint8), connectivity=8)
-    known = np.isfinite(departure) & (labels > 0)
-    keep = np.zeros(count, bool)
-    for k in np.unique(labels[known]):
-        keep[k] = float(np.median(departure[known & (labels == k)])) > OPAQUE_COLOUR
+    if count < 2:
+        return np.zeros(opaque.shape, bool)
+    known = np.where(np.isfinite(departure), labels, 0)  # a component with none: median NaN
+    median = ndimage.median(np.nan_to_num(departure), known, np.arange(1, count))
+    keep = np.concatenate([[False], np.asarray(median) > OPAQUE_COLOUR])
     return keep[labels]
 
 
@@ -263,12 +262,15 @@ def grow_to_outline(mask: np.ndarray, outline: np.ndarray, *, close_radius: int,
 
 
 def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_factor: float,
-                  max_object_share: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Glass evidence, opaque evidence and the table's footprint, all ``(H, W) bool``.
+                  max_object_share: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Glass evidence, opaque evidence, the table's footprint and the readings on the table,
+    all ``(H, W) bool``.
 
     Glass: holes where the table should be seen, and readings above the table that are
     ``rough_factor`` times rougher than the table at that depth. Opaque: smooth readings
-    clearly above the table. Footprint: :func:`table_footprint`.
+    clearly above the table. Footprint: :func:`table_footprint`. On the table:
+    :func:`on_table_readings`.
     """
     valid = depth_m > 0
     height, on_table = on_table_readings(depth_m, K, plane)
@@ -293,7 +295,7 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     opaque = above & ~is_rough
     opaque = cv2.morphologyEx(opaque.astype(np.uint8), cv2.MORPH_OPEN, _disk(2)) > 0
     glass &= ~opaque_edges(glass, opaque)
-    return glass, opaque, footprint
+    return glass, opaque, footprint, on_table
 
 
 def opaque_edges(glass: np.ndarray, opaque: np.ndarray, *, reach: int = EDGE_REACH,
@@ -399,7 +401,7 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     rgb : (H, W, 3) uint8; depth_m : (H, W) metres (0 = none); K : (3, 3); plane : the table.
     Returns candidates sorted by area (largest first); masks do not overlap.
     """
-    glass, opaque, footprint = evidence_maps(depth_m, K, plane, rough_factor=rough_factor,
+    glass, opaque, footprint, on_table = evidence_maps(depth_m, K, plane, rough_factor=rough_factor,
                                              max_object_share=max_object_share)
     pieces = find_candidates(glass, opaque, min_area=min_area // 4, close_radius=close_radius)
     # an object stands on the table: most of a candidate lies over the table's footprint (a
@@ -407,7 +409,6 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     pieces = [p for p in pieces if (p & footprint).sum() >= ON_TABLE_SHARE * p.sum()]
     if grabcut_iterations > 0:
         pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
-    on_table = on_table_readings(depth_m, K, plane)[1]
     departure = table_colour_departure(rgb, on_table)
     outline = outline_evidence(departure, on_table)
     kept = []
@@ -434,11 +435,11 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
 def _without_overlaps(found: list[Candidate]) -> list[Candidate]:
     """Candidates sorted by area (largest first), the pixels two of them claim (after
     :func:`grow_to_outline`) left to the larger."""
-    taken = None
     out = []
+    taken = np.zeros_like(found[0].mask) if found else None
     for c in sorted(found, key=lambda c: -int(c.mask.sum())):
-        mask = c.mask if taken is None else c.mask & ~taken
-        taken = mask.copy() if taken is None else taken | mask
+        mask = c.mask & ~taken
+        taken |= mask
         out.append(Candidate(mask, c.score))
     return out
 
