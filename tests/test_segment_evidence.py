@@ -119,6 +119,39 @@ def test_a_glass_seen_through_is_found_and_grown_to_its_outline():
     assert evidence_only < 0.75 and iou > 0.85
 
 
+def _smooth_front_glass(rgb, depth, seed: int = 3):
+    """A 10 cm glass whose front surface a stereo camera reads smoothly (a real D4xx on clear
+    plastic), with 15% of its readings missing in blobs and the table's colour through it, a
+    brighter rim at its outline. Returns the depth and the true ids ``(H, W)``."""
+    ids, _, _, glass_depth = solids_on_table([(GLASS, 0.1, 0.0, 0.0)])
+    body = ids > 0
+    rng = np.random.default_rng(seed)
+    holes = np.zeros(SHAPE, np.uint8)
+    ys, xs = np.nonzero(body)
+    for _ in range(12):
+        k = int(rng.integers(len(ys)))
+        cv2.circle(holes, (int(xs[k]), int(ys[k])), 5, 1, -1)
+    depth = np.where(body, np.where(holes > 0, 0.0, glass_depth), depth)
+    rim = body & ~(cv2.erode(body.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)
+    rgb[rim] = np.clip(rgb[rim].astype(int) + 40, 0, 255)
+    return depth, ids
+
+
+def test_a_glass_read_smoothly_as_a_real_camera_does_is_found_whole(monkeypatch):
+    """Smooth front-surface readings are an opaque object's mark by depth alone; the glass
+    still shows the table through itself and has holes, so it is a standing body and found
+    whole. Without that rule (BODY_SEES_TABLE out of reach) nothing is found."""
+    rgb, depth, plane = _table_frame((150, 150, 150))
+    depth, ids = _smooth_front_glass(rgb, depth)
+    hole_share = ((depth == 0) & (ids > 0)).sum() / (ids > 0).sum()
+    assert 0.05 < hole_share < 0.3
+    found = _segment(rgb, depth)
+    assert len(found.objects) == 1
+    assert instance_ious(found.ids, ids)[1] > 0.9
+    monkeypatch.setattr(tf, "BODY_SEES_TABLE", 1.01)
+    assert _segment(rgb, depth).objects == []
+
+
 def test_colour_departure_is_low_through_glass_and_high_on_an_opaque_colour():
     rgb, depth, plane = _table_frame((110, 80, 60))
     on_table = tf.on_table_readings(depth, K_TABLE, plane)[1]
@@ -218,8 +251,9 @@ def test_instances_preview_labels_each_instance_with_its_score():
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.23, false instances (>= 300 px, IoU < 0.2 with every object) 0.91 per
-    frame (7.6 per frame, and a mean IoU of 0.26, with every instance kept)."""
+    per true object mean 0.46, 8 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
+    < 0.2 with every object) 0.64 per frame; without the standing bodies (BODY_SEES_TABLE
+    out of reach) 0.23, none and 0.91."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
@@ -236,5 +270,5 @@ def test_measured_on_the_shared_real_frames(realdata):
                          if iou < 0.2 and (inst.ids == k).sum() >= 300)
             frames += 1
     assert frames == 11 and len(best) == 16
-    assert false / frames <= 1.0
-    assert np.mean(best) >= 0.2
+    assert false / frames <= 0.8
+    assert np.mean(best) >= 0.43 and sum(v >= 0.5 for v in best) >= 7

@@ -73,6 +73,17 @@ OUTLINE_REACH = 25  # pixels around an instance searched for its outline (grow_t
 OPAQUE_BAND = 8  # pixels around opaque evidence an instance is not grown into
 MAX_IMAGE_SHARE = 0.4  # most share of the image one instance covers: a region that large is the
 # table or the room failing as a whole, not an object standing on it
+BODY_SEED_HEIGHT = 0.015  # metres over the table: a reading this high is an object, not the
+# correlated bumps a stereo camera reads on a plain table at 1 m (at most 12 mm on the real frames)
+BODY_HEIGHT = 0.025  # metres: the 95th percentile height of a standing body's readings
+BODY_SEES_TABLE = 0.15  # least share of a body's pixels that show the table's colour: a glass
+# shows what is behind it (real glass 0.20-0.93, opaque objects on the real frames 0.02-0.09)
+BODY_HOLES = 0.05  # least share of a body's pixels without a reading: a sensor fails somewhere
+# on every glass; an opaque object's readings are dense (its dropouts run along its edge)
+BODY_INSIDE = 0.8  # share of a body inside one instance that makes it a part of that instance
+BODY_SHARED = 0.1  # share of a body each of two instances holding it makes it touching objects
+SEE_THROUGH_WINDOW = 91  # pixels: the table's colour around a body is taken beyond its width
+TABLE_LIKE = 1.5  # colour departure under which a pixel shows the table's colour
 
 
 @dataclass
@@ -261,11 +272,27 @@ def grow_to_outline(mask: np.ndarray, outline: np.ndarray, *, close_radius: int,
     return np.isin(labels, keep[keep > 0])
 
 
+@dataclass
+class Evidence:
+    """Per-pixel evidence of one frame, all ``(H, W)``.
+
+    glass, opaque : bool, see :func:`evidence_maps`; footprint : bool, :func:`table_footprint`;
+    on_table : bool, readings on the table; above : bool, readings clearly above the table
+    (rough or smooth); height : float metres over the table (0 where no reading).
+    """
+
+    glass: np.ndarray
+    opaque: np.ndarray
+    footprint: np.ndarray
+    on_table: np.ndarray
+    above: np.ndarray
+    height: np.ndarray
+
+
 def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_factor: float,
-                  max_object_share: float
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Glass evidence, opaque evidence, the table's footprint and the readings on the table,
-    all ``(H, W) bool``.
+                  max_object_share: float) -> Evidence:
+    """Glass evidence, opaque evidence, the table's footprint, the readings on and above the
+    table, and the heights (:class:`Evidence`).
 
     Glass: holes where the table should be seen, and readings above the table that are
     ``rough_factor`` times rougher than the table at that depth. Opaque: smooth readings
@@ -295,7 +322,78 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     opaque = above & ~is_rough
     opaque = cv2.morphologyEx(opaque.astype(np.uint8), cv2.MORPH_OPEN, _disk(2)) > 0
     glass &= ~opaque_edges(glass, opaque)
-    return glass, opaque, footprint, on_table
+    return Evidence(glass, opaque, footprint, on_table, above & footprint, height)
+
+
+def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, *, min_area: int,
+                    close_radius: int) -> list[np.ndarray]:
+    """Glass objects found by their readings over the table ``(H, W) bool`` each.
+
+    A real stereo camera often reads a glass's front surface smoothly, so a standing glass
+    looks like an opaque object by its depth alone; what gives it away is that it shows the
+    table's colour through itself (:data:`BODY_SEES_TABLE`) and that the sensor fails
+    somewhere on it (:data:`BODY_HOLES`). A body: the readings clearly above the table joined
+    to one at least :data:`BODY_SEED_HEIGHT` high (the table's own bumps never reach that),
+    closed and filled, at least ``min_area`` pixels and :data:`BODY_HEIGHT` tall.
+    """
+    count, labels = cv2.connectedComponents(ev.above.astype(np.uint8), connectivity=8)
+    seeded = np.zeros(count, bool)
+    seeded[labels[ev.above & (ev.height > BODY_SEED_HEIGHT)]] = True
+    seeded[0] = False
+    body = cv2.morphologyEx(seeded[labels].astype(np.uint8), cv2.MORPH_CLOSE,
+                            _disk(close_radius)) > 0
+    body = ndimage.binary_fill_holes(body)
+    count, labels = cv2.connectedComponents(body.astype(np.uint8), connectivity=8)
+    if count < 2:
+        return []
+    departure = table_colour_departure(rgb, ev.on_table, window=SEE_THROUGH_WINDOW)
+    valid = depth_m > 0
+    out = []
+    for k in range(1, count):
+        mask = labels == k
+        area = int(mask.sum())
+        read = mask & valid
+        if area < min_area or not read.any() or (area - read.sum()) < BODY_HOLES * area:
+            continue
+        if np.percentile(ev.height[read], 95) < BODY_HEIGHT:
+            continue
+        known = departure[mask]
+        known = known[np.isfinite(known)]
+        if known.size and np.mean(known < TABLE_LIKE) >= BODY_SEES_TABLE:
+            out.append(mask)
+    return out
+
+
+def with_bodies(found: list[Candidate], bodies: list[np.ndarray], evidence: np.ndarray,
+                one_object) -> list[Candidate]:
+    """Candidates with the :func:`standing_bodies` joined in.
+
+    A body overlapping no candidate is a new one, scored by its share of ``evidence``
+    ``(H, W) bool`` (glass evidence or readings above the table). A body mostly inside one
+    candidate (:data:`BODY_INSIDE`) is a part of it and adds nothing. A body that one
+    candidate overlaps less is joined to it: that candidate's glass evidence covered only the
+    part of the object the sensor failed on, unless the join is no longer ``one_object``
+    (a callable on an ``(H, W) bool`` mask: :func:`split_touching` leaves it whole). A body
+    that two candidates share (:data:`BODY_SHARED` of it each) is touching objects the
+    candidates have already parted, and adds nothing.
+    """
+    out = list(found)
+    for body in bodies:
+        area = int(body.sum())
+        overlap = np.array([int((c.mask & body).sum()) for c in out])
+        if not overlap.size or overlap.max() == 0:
+            out.append(Candidate(body, float(evidence[body].mean())))
+            continue
+        if (overlap >= BODY_SHARED * area).sum() > 1:
+            continue
+        j = int(np.argmax(overlap))
+        if overlap[j] < BODY_INSIDE * area:
+            others = [c.mask for i, c in enumerate(out) if i != j and overlap[i] > 0]
+            free = body & ~np.any(others, axis=0) if others else body
+            joined = out[j].mask | free
+            if one_object(joined):
+                out[j] = Candidate(joined, out[j].score)
+    return out
 
 
 def opaque_edges(glass: np.ndarray, opaque: np.ndarray, *, reach: int = EDGE_REACH,
@@ -401,8 +499,9 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     rgb : (H, W, 3) uint8; depth_m : (H, W) metres (0 = none); K : (3, 3); plane : the table.
     Returns candidates sorted by area (largest first); masks do not overlap.
     """
-    glass, opaque, footprint, on_table = evidence_maps(depth_m, K, plane, rough_factor=rough_factor,
-                                             max_object_share=max_object_share)
+    ev = evidence_maps(depth_m, K, plane, rough_factor=rough_factor,
+                       max_object_share=max_object_share)
+    glass, opaque, footprint, on_table = ev.glass, ev.opaque, ev.footprint, ev.on_table
     pieces = find_candidates(glass, opaque, min_area=min_area // 4, close_radius=close_radius)
     # an object stands on the table: most of a candidate lies over the table's footprint (a
     # glass at the far edge may rise above it in the image, so not all of it)
@@ -429,7 +528,13 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
         claimed |= c.mask
     out = [Candidate(grow_to_outline(c.mask, outline, close_radius=5,
                                      barred=claimed & ~c.mask), c.score) for c in kept]
-    return _without_overlaps(out)
+    bodies = standing_bodies(rgb, depth_m, ev, min_area=least, close_radius=close_radius)
+
+    def one_object(mask: np.ndarray) -> bool:
+        return len(split_touching(mask, K, plane, depth=depth_m, glass=glass,
+                                  close_radius=close_radius, min_area=min_area)) == 1
+
+    return _without_overlaps(with_bodies(out, bodies, glass | ev.above, one_object))
 
 
 def _without_overlaps(found: list[Candidate]) -> list[Candidate]:
