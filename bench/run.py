@@ -1,6 +1,7 @@
 """``make bench``: depth repair compared with raw depth and simple baselines; pose errors; timing.
 
-Not a test: it measures and writes bench/RESULTS.md (and bench/results.json, bench/mae.png).
+Not a test: it measures and writes bench/RESULTS.md (and bench/results.json, bench/mae.png), one
+section of results per entry of :data:`SECTIONS` (``python bench/run.py --list``).
 Synthetic set: seed 700 (no test uses it), one frame per scene. Real set: ../shared/realdata with
 the given masks imported (skipped with a reason when absent).
 """
@@ -16,14 +17,15 @@ import os
 for _threads in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_threads, "1")
 
-import hashlib
 import json
 import shutil
 import sys
 import time
-from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
+import click
 import cv2
 import numpy as np
 
@@ -32,65 +34,16 @@ from sr3d_cli.config import Config, IOConfig, SynthConfig
 from sr3d_cli.evaluate import depth_metrics, mean_metrics
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.pipeline import Pipeline
+from sr3d_cli.pose_error import METRICS as POSE_METRICS, pose_error
 from sr3d_cli.render import make_renderer
 from sr3d_cli.repair import inpaint_fill, plane_fill
 from sr3d_cli import stages
-from sr3d_cli.synth.generate import write_scene
 
-import generalise  # bench/generalise.py: the script's folder is on the path
+# bench/common.py and bench/generalise.py: the script's folder is on the path
+from common import ROOT, SHARED, generated_set, one_core, staged, timed_repair
+import generalise
 
-ROOT = Path(__file__).resolve().parent
-REAL = ROOT.parent.parent / "shared" / "realdata" / "cleargrasp-real"
-
-
-def generated_set(folder: Path, count: int, cfg: SynthConfig, renderer) -> None:
-    """Make sure ``folder`` holds scenes 0..count-1 of ``cfg``'s seed as the current generator
-    draws them: a stamp of the generator's sources (sr3d_cli/synth, sr3d_cli/geometry) is kept
-    with the set, and a changed generator regenerates it instead of measuring stale scenes."""
-    package = ROOT.parent / "sr3d_cli"
-    digest = hashlib.sha256()
-    for path in sorted([*(package / "synth").glob("*.py"), *(package / "geometry").glob("*.py")]):
-        digest.update(path.read_bytes())
-    stamp = folder / "GENERATOR"
-    if folder.is_dir() and not (stamp.is_file() and stamp.read_text() == digest.hexdigest()):
-        shutil.rmtree(folder)
-    for i in range(count):
-        if not (folder / f"scene_{i:04d}" / "camera.json").is_file():
-            write_scene(folder / f"scene_{i:04d}", i, cfg, renderer)
-    folder.mkdir(parents=True, exist_ok=True)
-    stamp.write_text(digest.hexdigest())
-
-
-@contextmanager
-def one_core():
-    """This process pinned to one CPU core for the block (the targets' "on one core"): every
-    thread of it, as BLAS and OpenCV start their workers at import and a worker left on
-    another core still works or spins there (the main thread alone pinned, the grasp stage
-    used 1.4 s of CPU per 0.7 s; threads started in the block inherit the pin)."""
-    tasks = sorted(int(t) for t in os.listdir("/proc/self/task")) \
-        if os.path.isdir("/proc/self/task") else [0]
-    before = {t: os.sched_getaffinity(t) for t in tasks}
-    core = {min(before[tasks[0]])}
-    for t in tasks:
-        os.sched_setaffinity(t, core)
-    threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)  # OpenCV's pool, sized at import for every core
-    try:
-        yield
-    finally:
-        cv2.setNumThreads(threads)
-        for t, cores in before.items():
-            try:
-                os.sched_setaffinity(t, cores)
-            except OSError:  # the thread has ended
-                pass
-
-
-def _rotation_error(R, R_gt, symmetric: bool) -> float:
-    if symmetric:
-        return float(np.degrees(np.arccos(np.clip(R[:, 2] @ R_gt[:, 2], -1, 1))))
-    c = (np.trace(R.T @ R_gt) - 1) / 2
-    return float(np.degrees(np.arccos(np.clip(c, -1, 1))))
+REAL = SHARED / "realdata" / "cleargrasp-real"
 
 
 def run_methods(source, fid, cfg_default: Config, cfg_paper: Config, work: Path, masks: str,
@@ -100,8 +53,7 @@ def run_methods(source, fid, cfg_default: Config, cfg_paper: Config, work: Path,
     out = {"raw": frame.depth_m}
     gt_mask_path = source.gt_mask_path(fid)
     for name, cfg in (("sr3d", cfg_default), ("paper", cfg_paper)):
-        scene = type(source)(source.root, out=work / name / source.name, name=source.name,
-                             io=source.io)
+        scene = staged(source, work / name / source.name)
         f = scene.load_frame(fid)
         pipe = Pipeline(cfg)
         t = {}
@@ -112,12 +64,7 @@ def run_methods(source, fid, cfg_default: Config, cfg_paper: Config, work: Path,
             inst = from_masks([ids == k for k in np.unique(ids) if k > 0],
                               [1.0] * (len(np.unique(ids)) - 1), ids.shape, "glass", 1)
             stages.write_instances(scene, fid, inst, "import")
-        start = time.perf_counter()
-        pipe.ensure_upstream(f, t)
-        t0 = time.perf_counter()
-        depth, ids = pipe.repaired_depth(f)
-        t["render"] = time.perf_counter() - t0
-        t["total"] = time.perf_counter() - start
+        depth, ids = timed_repair(pipe, f, t)
         timings.setdefault(name, []).append(t)
         out[name] = depth
         if name == "sr3d":
@@ -130,10 +77,9 @@ def run_methods(source, fid, cfg_default: Config, cfg_paper: Config, work: Path,
 
 
 def pose_errors(source, fid, aligner, plane_cfg) -> list[dict]:
-    """Align alone: ground-truth masks and meshes, pose against the truth."""
+    """Align alone: ground-truth masks and meshes, pose against the truth
+    (:func:`sr3d_cli.pose_error.pose_error`); ``seconds``: the aligner's."""
     import trimesh
-
-    from sr3d_cli.align.view_matching import is_axisymmetric
 
     frame = source.load_frame(fid)
     ids = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
@@ -151,12 +97,10 @@ def pose_errors(source, fid, aligner, plane_cfg) -> list[dict]:
         except ValueError as exc:
             rows.append({"label": obj["label"], "failed": str(exc)})
             continue
-        T = np.asarray(obj["T_cam_obj"])
+        seconds = time.perf_counter() - t
+        error = pose_error(p.T_cam_obj, p.scale, mesh, obj["T_cam_obj"], obj["scale"], mesh)
         rows.append({"label": obj["label"], "pose": obj["pose"],
-                     "rotation_deg": _rotation_error(p.R, T[:3, :3], is_axisymmetric(mesh)),
-                     "translation_mm": 1000 * float(np.linalg.norm(p.t - T[:3, 3])),
-                     "scale_pct": 100 * abs(p.scale / obj["scale"] - 1),
-                     "seconds": time.perf_counter() - t})
+                     **{k: error[k] for k in POSE_METRICS}, "seconds": seconds})
     return rows
 
 
@@ -246,16 +190,15 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
     raw_frames, seconds = [], []
     for source in discover_scenes(synth, IOConfig(), None):
         fid = "000000"
-        staged = type(source)(source.root, out=work / "synthetic" / "sr3d" / source.name,
-                              name=source.name, io=source.io)
-        frame = staged.load_frame(fid)
+        repaired = staged(source, work / "synthetic" / "sr3d" / source.name)
+        frame = repaired.load_frame(fid)
         depth, _ = Pipeline(cfg).repaired_depth(frame)
-        write_depth(staged.output_path("repaired", fid), depth, frame.camera.depth_scale)
-        seconds += _plan_draws(staged, fid, planners, by_draw, cfg)
-        raw = type(source)(source.root, out=work / "grasp_raw" / source.name, name=source.name,
-                           io=source.io)
+        write_depth(repaired.output_path("repaired", fid), depth, frame.camera.depth_scale)
+        seconds += _plan_draws(repaired, fid, planners, by_draw, cfg)
+        raw = staged(source, work / "grasp_raw" / source.name)
         (raw.out / "masks").mkdir(parents=True, exist_ok=True)
-        shutil.copy(staged.stage_file("masks", fid, (".png",)), raw.out / "masks" / f"{fid}.png")
+        shutil.copy(repaired.stage_file("masks", fid, (".png",)),
+                    raw.out / "masks" / f"{fid}.png")
         stages.grasp_frame(raw.load_frame(fid), planners[0], cfg.plane, "raw")
         raw_frames.append(_judged(raw, fid, cfg))
         print("grasp", source.name, f"repaired/0 top1 {by_draw[0][-1]['top1_success']:.2f}",
@@ -266,13 +209,7 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
 
 def _repair(pipeline: Pipeline, frame) -> np.ndarray:
     """Run the frame's missing stages and write its repaired depth; returns it, (H, W) m."""
-    from sr3d_cli.io.images import write_depth
-
-    pipeline.ensure_upstream(frame)
-    depth, _ = pipeline.repaired_depth(frame)
-    write_depth(frame.scene.output_path("repaired", frame.frame_id), depth,
-                frame.camera.depth_scale)
-    return depth
+    return timed_repair(pipeline, frame, {}, write=True)[0]
 
 
 def _object_metrics(source, fid: str, depth: np.ndarray) -> dict:
@@ -515,8 +452,6 @@ def speed_bench(work: Path, frames: int = 12) -> dict:
     701), default backends, this process pinned to one CPU core. Per-stage seconds per frame
     as ``sr3d repair-depth`` runs them (the repaired PNG written), median over ``frames``
     frames; one frame before them loads everything and is not counted."""
-    from sr3d_cli.io.images import write_depth
-
     scenes, out = work / "speed_in", work / "speed_out"
     cfg = SynthConfig(seed=701, views=1, resolutions=["640x480"], objects=[1, 1],
                       distractors=[0, 0])
@@ -527,17 +462,9 @@ def speed_bench(work: Path, frames: int = 12) -> dict:
         for i in range(frames + 1):
             name = f"scene_{i:04d}"
             src, = discover_scenes(scenes / name, IOConfig(), None)
-            scene = type(src)(src.root, out=out / name, name=name, io=src.io)
-            frame = scene.load_frame("000000")
+            frame = staged(src, out / name).load_frame("000000")
             t = {}
-            start = time.perf_counter()
-            pipe.ensure_upstream(frame, t)
-            t0 = time.perf_counter()
-            depth, _ = pipe.repaired_depth(frame)
-            write_depth(scene.output_path("repaired", "000000", ".png"), depth,
-                        frame.camera.depth_scale)
-            t["render"] = time.perf_counter() - t0
-            t["total"] = time.perf_counter() - start
+            depth, _ = timed_repair(pipe, frame, t, write=True)
             gt = src.load_gt_depth("000000", depth.shape)
             mask = src.load_mask(src.gt_mask_path("000000"), depth.shape) > 0
             t["mae"] = depth_metrics(depth, gt, mask)["mae"]
@@ -606,83 +533,127 @@ def mesh_bench(synth: Path) -> dict:
     return result
 
 
-SECTIONS = ("realdata", "extsim", "depth", "poses", "grasp", "heldout", "scale", "speed", "mesh")
-OPTIONAL = ("breakdown",)  # run only when named: bench/run.py breakdown
+METHODS = ("raw", "plane-fill", "inpaint", "paper", "sr3d")  # depth section, in table order
+SYNTH_SEED, SYNTH_FRAMES = 700, 24  # the set sr3d's parameters were tuned on (no test uses it)
 
 
-def main(frames: int = 24, sections: tuple[str, ...] = SECTIONS) -> None:
-    work = ROOT / "work"
-    synth = work / "synth700"
-    cfg = SynthConfig(seed=700, views=1)
-    renderer = make_renderer("auto")
-    generated_set(synth, frames, cfg, renderer)
-    default = Config()
-    paper = Config()
-    paper.align.mode = "paper"
-    paper.align.rolls = 4  # 162 viewpoints x 4 rolls: 12 rolls triples a run already ~10 min
-    previous = ROOT / "results.json"
-    results = json.loads(previous.read_text()) if previous.is_file() else {}
-    for key in ("synthetic", "real", "timings", *SECTIONS):  # the depth section's three
-        results.setdefault(key, {})
-    if "realdata" in sections:
-        results["realdata"] = generalise.realdata_section(work, default, one_core)
-    if "extsim" in sections:
-        results["extsim"] = generalise.extsim_section(work, default, one_core)
-    methods = ("raw", "plane-fill", "inpaint", "paper", "sr3d")
-    for label, root, masks in (("synthetic", synth, "segment"), ("real", REAL, "import")):
-        if "depth" not in sections:
-            break
-        shutil.rmtree(work / label, ignore_errors=True)  # stage outputs: time every stage
+@dataclass
+class Bench:
+    """What the sections share: the work folder, the seed-700 set in it, the default config
+    and the paper-mode one (``align.mode: paper``), the renderer."""
+
+    work: Path
+    synth: Path
+    default: Config
+    paper: Config
+    renderer: object
+
+    @classmethod
+    def prepare(cls, work: Path) -> "Bench":
+        synth = work / f"synth{SYNTH_SEED}"
+        renderer = make_renderer("auto")
+        generated_set(synth, SYNTH_FRAMES, SynthConfig(seed=SYNTH_SEED, views=1), renderer)
+        paper = Config()
+        paper.align.mode = "paper"
+        paper.align.rolls = 4  # 162 viewpoints x 4 rolls: 12 rolls triples a run already ~10 min
+        return cls(work, synth, Config(), paper, renderer)
+
+
+def depth_section(bench: Bench) -> dict:
+    """Every method of :data:`METHODS` on the seed-700 set (sr3d's own masks) and on the real
+    ClearGrasp frames (true masks imported): mean depth metrics, median MAE, stage timings."""
+    results: dict = {"timings": {}}
+    for label, root, masks in (("synthetic", bench.synth, "segment"), ("real", REAL, "import")):
+        work = bench.work / label
+        shutil.rmtree(work, ignore_errors=True)  # stage outputs: time every stage
         if not root.is_dir():
             results[label] = {"skipped": f"{root} not present"}
             continue
-        rows = {m: [] for m in methods}
+        rows = {m: [] for m in METHODS}
         timings: dict = {}
-        for source in discover_scenes(root, IOConfig(), work / label):
+        for source in discover_scenes(root, IOConfig(), work):
             for fid in source.frame_ids():
-                preds = run_methods(source, fid, default, paper, work / label, masks, timings)
-                frame = source.load_frame(fid)
-                gt = source.load_gt_depth(fid, frame.depth_m.shape)
-                mask = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape) > 0
-                for m in methods:
-                    rows[m].append(depth_metrics(preds[m], gt, mask))
+                preds = run_methods(source, fid, bench.default, bench.paper, work, masks,
+                                    timings)
+                for m in METHODS:
+                    rows[m].append(_object_metrics(source, fid, preds[m]))
                 print(label, source.frame_key(fid), " ".join(
-                    f"{m}={rows[m][-1]['mae'] * 1000:.1f}mm" for m in methods), file=sys.stderr)
-        results[label] = {m: mean_metrics(rows[m]) for m in methods}
+                    f"{m}={rows[m][-1]['mae'] * 1000:.1f}mm" for m in METHODS), file=sys.stderr)
+        results[label] = {m: mean_metrics(rows[m]) for m in METHODS}
         results[label]["median_mae"] = {m: float(np.median([r["mae"] for r in rows[m]]))
-                                        for m in methods}
+                                        for m in METHODS}
         results["timings"][label] = {
             name: {k: float(np.median([t.get(k, np.nan) for t in ts if k in t]))
                    for k in ("segment", "reconstruct", "align", "render", "total")
                    if any(k in t for t in ts)}
             for name, ts in timings.items()}
-    for mode in ("sr3d", "paper") if "poses" in sections else ():
-        c = Config().align if mode == "sr3d" else paper.align
-        aligner = Aligner(c)
+    return results
+
+
+def poses_section(bench: Bench) -> dict:
+    """Align alone in both modes on the seed-700 set (:func:`pose_errors`): medians."""
+    out = {}
+    for mode, cfg in (("sr3d", bench.default), ("paper", bench.paper)):
+        aligner = Aligner(cfg.align)
         rows = []
-        for source in discover_scenes(synth, IOConfig(), None):
-            rows += pose_errors(source, "000000", aligner, default.plane)
+        for source in discover_scenes(bench.synth, IOConfig(), None):
+            rows += pose_errors(source, "000000", aligner, bench.default.plane)
         ok = [r for r in rows if "failed" not in r]
-        results["poses"][mode] = {
-            "objects": len(rows), "failed": len(rows) - len(ok),
-            **{f"median_{k}": float(np.median([r[k] for r in ok]))
-               for k in ("rotation_deg", "translation_mm", "scale_pct", "seconds")}}
-    if "grasp" in sections:
-        results["grasp"] = grasp_bench(synth, work, default)
-    if "heldout" in sections:
-        results["heldout"] = heldout_bench(work, default, renderer)
-    if "scale" in sections:
-        results["scale"] = scale_bench(synth, work)
-    if "speed" in sections:
-        results["speed"] = speed_bench(work)
-    if "mesh" in sections:
-        results["mesh"] = mesh_bench(synth)
-    if "breakdown" in sections:
-        results["breakdown"] = breakdown_bench(work, default, renderer)
-    (ROOT / "results.json").write_text(json.dumps(results, indent=1,
-                                                  default=float))
-    write_report(results, methods)
-    plot(results, methods)
+        out[mode] = {"objects": len(rows), "failed": len(rows) - len(ok),
+                     **{f"median_{k}": float(np.median([r[k] for r in ok]))
+                        for k in (*POSE_METRICS, "seconds")}}
+    return {"poses": out}
+
+
+@dataclass(frozen=True)
+class Section:
+    run: Callable[[Bench], dict]  # -> the entries of results.json it replaces
+    about: str
+    optional: bool = False  # run only when named
+
+
+# in the order they run: grasp plans on the depth section's stage outputs
+SECTIONS: dict[str, Section] = {
+    "realdata": Section(lambda b: {"realdata": generalise.realdata_section(b.work, b.default)},
+                        "real frames of ../shared/realdata, no masks given (headline)"),
+    "extsim": Section(lambda b: {"extsim": generalise.extsim_section(b.work, b.default)},
+                      "../shared/extsim, an independent renderer, grasps too (headline)"),
+    "depth": Section(depth_section, "depth of every method, seed 700 and the real ClearGrasp "
+                                    "frames with true masks"),
+    "poses": Section(poses_section, "align alone from true masks and meshes: pose error"),
+    "grasp": Section(lambda b: {"grasp": grasp_bench(b.synth, b.work, b.default)},
+                     "grasps on seed 700 (needs the depth section's outputs)"),
+    "heldout": Section(lambda b: {"heldout": heldout_bench(b.work, b.default, b.renderer)},
+                       f"the whole pipeline on the held-out seed {HELD_OUT_SEED} (totals only)"),
+    "scale": Section(lambda b: {"scale": scale_bench(b.synth, b.work)},
+                     "frames per second of sr3d repair-depth with 1 and 2 workers"),
+    "speed": Section(lambda b: {"speed": speed_bench(b.work)},
+                     "seconds per stage, one object, one core"),
+    "mesh": Section(lambda b: {"mesh": mesh_bench(b.synth)},
+                    "segmentation IoU and reconstruction Chamfer distance"),
+    "breakdown": Section(lambda b: {"breakdown": breakdown_bench(b.work, b.default,
+                                                                 b.renderer)},
+                         f"where grasps are lost, study seed {BREAKDOWN_SEED}", optional=True),
+}
+DEFAULT_SECTIONS = tuple(name for name, s in SECTIONS.items() if not s.optional)
+
+
+def run(sections: tuple[str, ...], out: Path) -> dict:
+    """Run ``sections`` (in :data:`SECTIONS` order) into ``out``/results.json, keeping the other
+    sections' results found there; write ``out``/RESULTS.md and ``out``/mae.png."""
+    bench = Bench.prepare(ROOT / "work")
+    previous = out / "results.json"
+    results = json.loads(previous.read_text()) if previous.is_file() else {}
+    for key in ("synthetic", "real", "timings", *SECTIONS):  # the depth section's three
+        results.setdefault(key, {})
+    for name, section in SECTIONS.items():
+        if name in sections:
+            results.update(section.run(bench))
+    out.mkdir(parents=True, exist_ok=True)
+    previous.write_text(json.dumps(results, indent=1, default=float))
+    write_report(results, METHODS, out)
+    plot(results, METHODS, out)
+    return results
 
 
 def _breakdown_report(breakdown: dict) -> list[str]:
@@ -754,7 +725,7 @@ def _others(g: dict) -> str:
                    if m in g else " - | - |" for m in OTHER_CONTACTS)
 
 
-def write_report(results: dict, methods) -> None:
+def write_report(results: dict, methods, out: Path) -> None:
     lines = ["# sr3d benchmark", "",
              "Written by `make bench` (bench/run.py). The first two sections are the headline: "
              "data sr3d was not built on (bench/generalise.py). The sections after them are "
@@ -770,6 +741,8 @@ def write_report(results: dict, methods) -> None:
              "paper` (162 viewpoints x 4 rolls, to keep the run short).", ""]
     for label in ("synthetic", "real"):
         r = results[label]
+        if not r:  # the depth section has not run into this folder
+            continue
         lines.append(f"## {label}")
         if "skipped" in r:
             lines += [f"skipped: {r['skipped']}", ""]
@@ -787,13 +760,16 @@ def write_report(results: dict, methods) -> None:
                 f"{k} {v:.3f}" for k, v in t.items()))
         lines.append("")
     lines += ["## align alone (synthetic, ground-truth masks and meshes)", "",
-              "| mode | objects | failed | rotation deg | translation mm | scale % | s/object |",
-              "|---|---|---|---|---|---|---|"]
+              "| mode | objects | failed | rotation deg | translation mm | scale % | ADD-S mm "
+              "| s/object |", "|---|---|---|---|---|---|---|---|"]
     for mode, p in results["poses"].items():
         lines.append(f"| {mode} | {p['objects']} | {p['failed']} | {p['median_rotation_deg']:.2f} "
                      f"| {p['median_translation_mm']:.1f} | {p['median_scale_pct']:.2f} | "
+                     f"{p.get('median_add_s_mm', float('nan')):.1f} | "
                      f"{p['median_seconds']:.2f} |")
-    lines += ["", "Rotation error of axially symmetric objects is the axis angle. Medians.", ""]
+    lines += ["", "Rotation error of axially symmetric objects is the axis angle; ADD-S: mean "
+              "distance from the true surface to the placed one (`sr3d_cli/pose_error.py`, as "
+              "`sr3d evaluate` reports it). Medians; seconds: the aligner's.", ""]
     grasp = results.get("grasp", {})
     if grasp:
         lines += ["## grasps (synthetic, sr3d's masks; judged on the true meshes)", "",
@@ -886,14 +862,14 @@ def write_report(results: dict, methods) -> None:
                   f"| {speed['segment']:.3f} | {speed['reconstruct']:.3f} | {speed['align']:.3f} "
                   f"| {speed['render']:.3f} | {speed['total']:.3f} | {1000 * speed['mae']:.1f} |",
                   ""]
-    (ROOT / "RESULTS.md").write_text("\n".join(lines))
+    (out / "RESULTS.md").write_text("\n".join(lines))
 
 
-def plot(results: dict, methods) -> None:
+def plot(results: dict, methods, out: Path) -> None:
     """Bar chart of MAE per method (mm), synthetic and real side by side."""
     h, w = 320, 640
     img = np.full((h, w, 3), 255, np.uint8)
-    sets = [k for k in ("synthetic", "real") if "skipped" not in results[k]]
+    sets = [k for k in ("synthetic", "real") if results[k] and "skipped" not in results[k]]
     values = [[results[s][m]["mae"] * 1000 for m in methods] for s in sets]
     top = max(max(v) for v in values) if values else 1
     colours = [(80, 80, 200), (200, 120, 60)]
@@ -907,13 +883,29 @@ def plot(results: dict, methods) -> None:
         cv2.putText(img, m, (40 + mi * 120, h - 25), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
     cv2.putText(img, "MAE mm: " + " / ".join(sets), (10, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
                 (0, 0, 0), 1)
-    cv2.imwrite(str(ROOT / "mae.png"), img)
+    cv2.imwrite(str(out / "mae.png"), img)
+
+
+@click.command(context_settings={"help_option_names": ["-h", "--help"]})
+@click.argument("sections", nargs=-1, type=click.Choice(list(SECTIONS)), metavar="[SECTION]...")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=ROOT,
+              show_default="bench/", help="Folder of results.json, RESULTS.md and mae.png.")
+@click.option("--list", "show", is_flag=True, help="List the sections and exit.")
+def main(sections: tuple[str, ...], out: Path, show: bool) -> None:
+    """Measure sr3d: run SECTIONS (default: all but the optional ones) and rewrite the
+    report; the results of sections not run are kept from OUT/results.json.
+
+    \b
+    Example:
+      python bench/run.py grasp heldout
+    """
+    if show:
+        for name, section in SECTIONS.items():
+            click.echo(f"{name:10s} {section.about}"
+                       + ("  [only when named]" if section.optional else ""))
+        return
+    run(sections or DEFAULT_SECTIONS, out)
 
 
 if __name__ == "__main__":
-    # sections to run (default all): depth poses grasp heldout scale speed mesh; others' results
-    # are kept
-    unknown = set(sys.argv[1:]) - set(SECTIONS + OPTIONAL)
-    if unknown:
-        sys.exit(f"unknown section(s) {sorted(unknown)}; choose from {SECTIONS + OPTIONAL}")
-    main(sections=tuple(sys.argv[1:]) or SECTIONS)
+    main()
