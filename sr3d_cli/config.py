@@ -27,6 +27,7 @@ from typing import Any, Mapping
 
 import yaml
 
+from sr3d_cli.backends import REGISTRIES
 from sr3d_cli.errors import ConfigError
 
 
@@ -251,9 +252,7 @@ def is_advanced(section: str, key: str) -> bool:
 
 CHOICES: dict[str, tuple[str, ...]] = {
     "io.format": ("auto", "native", "cleargrasp", "transcg", "bop"),
-    "render.backend": ("auto", "pyrender", "numpy"),
-    "segment.backend": ("training-free", "sam-onnx", "import"),
-    "reconstruct.backend": ("revolution", "onnx", "library"),
+    **{registry.key: registry.names for registry in REGISTRIES},
     "align.mode": ("sr3d", "paper"),
     "repair.outside_render": ("nearest", "keep", "plane"),
     "grasp.source": ("repaired", "raw"),
