@@ -25,17 +25,18 @@ import trimesh
 from sr3d_cli.errors import InputError
 from sr3d_cli.geometry.transforms import place_points
 
-METRICS = ("rotation_deg", "translation_mm", "scale_pct", "add_s_mm")
+METRICS = ("rotation_deg", "axis_deg", "translation_mm", "scale_pct", "add_s_mm")
 TRUE_POINTS = 1000  # true-surface points averaged by ADD-S: 0.1 mm spread of the mean
 PRED_POINTS = 20000  # placed-surface points searched: about 1 mm apart on a 10 cm glass,
 # so a point on the surface itself lies about 0.3 mm from the nearest
 MATCH_IOU = 0.5  # a placed object is a true object's when their masks overlap this well
 SEED_TRUE, SEED_PRED = 0, 1  # surface samples: the same scores on every run
-UNITS = {"rotation_deg": "degrees", "translation_mm": "mm", "scale_pct": "percent",
-         "add_s_mm": "mm"}
+UNITS = {"rotation_deg": "degrees", "axis_deg": "degrees", "translation_mm": "mm",
+         "scale_pct": "percent", "add_s_mm": "mm"}
 METHOD = (f"true objects (gt/objects) matched to placed ones (poses/) by mask IoU >= "
           f"{MATCH_IOU:g}; rotation: angle between the rotations, between the z axes only where "
-          "the true mesh is a surface of revolution; translation: between the base centres "
+          "the true mesh is a surface of revolution; axis: angle between the z axes (what a "
+          "surface of revolution can get right); translation: between the base centres "
           "(object origins); scale: placed height against the true height; ADD-S: mean "
           "distance from the true surface to the nearest point of the placed one")
 
@@ -95,8 +96,8 @@ def pose_error(T_pred: np.ndarray, scale_pred: float, mesh_pred: trimesh.Trimesh
     Returns
     -------
     dict
-        ``rotation_deg`` (:func:`rotation_error_deg`), ``translation_mm`` (between the base
-        centres), ``scale_pct`` (100 |placed height / true height - 1|), ``add_s_mm`` (ADD-S of
+        ``rotation_deg`` (:func:`rotation_error_deg`), ``axis_deg`` (between the z axes,
+        whatever the symmetry), ``translation_mm`` (between the base centres), ``scale_pct`` (100 |placed height / true height - 1|), ``add_s_mm`` (ADD-S of
         the placed surfaces, :func:`add_s`), ``symmetric``.
     """
     T_pred, T_true = np.asarray(T_pred, dtype=np.float64), np.asarray(T_true, dtype=np.float64)
@@ -106,6 +107,7 @@ def pose_error(T_pred: np.ndarray, scale_pred: float, mesh_pred: trimesh.Trimesh
     pred, _ = trimesh.sample.sample_surface(mesh_pred, PRED_POINTS, seed=SEED_PRED)
     size_true = scale_true * height(mesh_true)
     return {"rotation_deg": rotation_error_deg(T_pred[:3, :3], T_true[:3, :3], symmetric),
+            "axis_deg": rotation_error_deg(T_pred[:3, :3], T_true[:3, :3], symmetric=True),
             "translation_mm": 1000 * float(np.linalg.norm(T_pred[:3, 3] - T_true[:3, 3])),
             "scale_pct": 100 * abs(scale_pred * height(mesh_pred) / size_true - 1)
             if size_true > 0 else math.nan,

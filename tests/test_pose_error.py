@@ -59,6 +59,9 @@ def test_a_known_rotation_of_an_asymmetric_mesh_gives_that_angle():
     e = pose_error(_turned(T, Z, 30), 0.1, box, T, 0.1, box)
     assert e["symmetric"] is False
     assert e["rotation_deg"] == pytest.approx(30, abs=1e-6)
+    assert e["axis_deg"] == pytest.approx(0, abs=1e-6)  # turned about its z axis
+    tilted = pose_error(_turned(T, np.array([0, 1.0, 0]), 12), 0.1, box, T, 0.1, box)
+    assert tilted["rotation_deg"] == pytest.approx(12) and tilted["axis_deg"] == pytest.approx(12)
     assert e["translation_mm"] == pytest.approx(0, abs=1e-9)
     assert 3.0 < e["add_s_mm"] < 30.0  # corners moved by up to 34 mm, the faces overlap
 
@@ -97,10 +100,10 @@ def test_instances_match_one_to_one_by_best_iou():
 
 
 def test_summary_counts_matched_objects_and_takes_medians():
-    rows = [{"pred_id": 1, "rotation_deg": 1.0, "translation_mm": 2.0, "scale_pct": 3.0,
-             "add_s_mm": 4.0},
-            {"pred_id": 2, "rotation_deg": 3.0, "translation_mm": 4.0, "scale_pct": 5.0,
-             "add_s_mm": 6.0},
+    rows = [{"pred_id": 1, "rotation_deg": 1.0, "axis_deg": 1.0, "translation_mm": 2.0,
+             "scale_pct": 3.0, "add_s_mm": 4.0},
+            {"pred_id": 2, "rotation_deg": 3.0, "axis_deg": 0.0, "translation_mm": 4.0,
+             "scale_pct": 5.0, "add_s_mm": 6.0},
             {"pred_id": None}]
     s = summarise(rows)
     assert (s["objects"], s["matched"]) == (3, 2)

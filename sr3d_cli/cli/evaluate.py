@@ -238,8 +238,9 @@ def format_poses(summary: dict) -> str:
 
     return (f"# poses: {summary['matched']} of {summary['objects']} true objects placed; "
             f"median rotation {cell('rotation_deg', 'deg')} (axis only for surfaces of "
-            f"revolution), translation {cell('translation_mm', 'mm')}, scale "
-            f"{cell('scale_pct', '%')}, ADD-S {cell('add_s_mm', 'mm')}")
+            f"revolution; axis of every object {cell('axis_deg', 'deg')}), translation "
+            f"{cell('translation_mm', 'mm')}, scale {cell('scale_pct', '%')}, ADD-S "
+            f"{cell('add_s_mm', 'mm')}")
 
 
 def _evaluate_grasps(scene, out, frames, fmt, contacts: str = "grid"):
