@@ -22,7 +22,6 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from sr3d_cli.errors import InputError
 from sr3d_cli.geometry.transforms import place_points
 
 METRICS = ("rotation_deg", "axis_deg", "translation_mm", "scale_pct", "add_s_mm")
@@ -159,7 +158,8 @@ def pose_masks_path(source, frame_id: str, poses: dict) -> Path | None:
 
 def evaluate_frame_poses(source, frame_id: str) -> dict | None:
     """Pose error of every true object of a frame, None where the frame has no true poses
-    (gt/objects) or no placed objects (poses/).
+    (gt/objects), no placed objects (poses/), or no masks to match them by (gt/masks and the
+    placed objects' masks).
 
     Returns ``{"masks": path, "objects": [...]}``: one row per true object with its ``id`` and
     ``label``, and either the matched placed object (``pred_id``, mask ``iou``) and the
@@ -176,8 +176,7 @@ def evaluate_frame_poses(source, frame_id: str) -> dict | None:
     masks = pose_masks_path(source, frame_id, poses)
     true_path = source.gt_mask_path(frame_id)
     if masks is None or true_path is None:
-        raise InputError(source.frame_key(frame_id), "pose evaluation needs the true masks "
-                                                     "(gt/masks) and the placed objects' masks")
+        return None
     matches = match_instances(source.load_mask(masks, shape), source.load_mask(true_path, shape))
     placed = {int(o["id"]): o for o in poses.get("objects", [])}
     rows = []
