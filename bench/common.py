@@ -19,6 +19,7 @@ from sr3d_cli.synth.generate import write_scene
 
 ROOT = Path(__file__).resolve().parent
 SHARED = ROOT.parent.parent / "shared"
+OTHER_CONTACTS = ("pads", "line")  # contact models judged beside the default grid of rays
 
 
 def generated_set(folder: Path, count: int, cfg: SynthConfig, renderer) -> None:
