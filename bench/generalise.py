@@ -26,7 +26,8 @@ from sr3d_cli.io.images import write_depth
 from sr3d_cli.pipeline import Pipeline
 from sr3d_cli.repair import inpaint_fill, plane_fill
 
-SHARED = Path(__file__).resolve().parent.parent.parent / "shared"
+from common import SHARED, one_core, staged, timed_repair
+
 DETECTED_IOU = 0.5  # a true object is found when an instance overlaps it this well
 FALSE_IOU, FALSE_AREA = 0.2, 300  # an instance this large overlapping no object this well
 INVENTED_REACH, INVENTED_CHANGE = 15, 0.01  # px from every object; metres of change
@@ -52,7 +53,7 @@ def invented_share(repaired: np.ndarray, raw: np.ndarray, truth: np.ndarray) -> 
     return float((far & changed).sum() / truth.size)
 
 
-def run_set(root: Path, work: Path, cfg: Config, one_core, grasps: bool = False) -> dict:
+def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
     """The whole default pipeline on every frame below ``root`` (its ground truth never read
     by the pipeline); numbers as described in the module docstring. ``work`` is emptied first:
     every stage runs, and is timed, on the current code."""
@@ -65,27 +66,23 @@ def run_set(root: Path, work: Path, cfg: Config, one_core, grasps: bool = False)
 
         planner = Planner(cfg.grasp)
     for source in discover_scenes(root, IOConfig(), None):
-        staged = type(source)(source.root, out=work / source.name, name=source.name,
-                              io=source.io)
-        for fid in staged.frame_ids():
-            frame = staged.load_frame(fid)
-            truth = staged.load_mask(staged.gt_mask_path(fid), frame.depth_m.shape)
-            gt = staged.load_gt_depth(fid, frame.depth_m.shape)
+        scene = staged(source, work / source.name)
+        for fid in scene.frame_ids():
+            frame = scene.load_frame(fid)
+            truth = scene.load_mask(scene.gt_mask_path(fid), frame.depth_m.shape)
+            gt = scene.load_gt_depth(fid, frame.depth_m.shape)
             pipe, t = Pipeline(cfg), {}
             with one_core():
                 start = time.perf_counter()
                 try:
-                    pipe.ensure_upstream(frame, t)
-                    t0 = time.perf_counter()
-                    depth, ids = pipe.repaired_depth(frame)
-                    t["render"] = time.perf_counter() - t0
+                    depth, ids = timed_repair(pipe, frame, t)
                 except Exception as exc:  # a frame the pipeline fails on counts as raw depth
-                    print(f"{staged.frame_key(fid)}: failed: {exc}", file=sys.stderr)
+                    print(f"{scene.frame_key(fid)}: failed: {exc}", file=sys.stderr)
                     depth, ids = frame.depth_m, np.zeros(frame.depth_m.shape, np.int32)
                 t["total"] = time.perf_counter() - start
             timings.append(t)
-            pred, _ = stages.load_instances(staged, fid, frame.depth_m.shape) \
-                if staged.stage_file("masks", fid, (".png",)) else (ids, {})
+            pred, _ = stages.load_instances(scene, fid, frame.depth_m.shape) \
+                if scene.stage_file("masks", fid, (".png",)) else (ids, {})
             seg = segmentation_scores(pred, truth)
             ious += list(seg["best_iou"].values())
             false.append(seg["false"])
@@ -99,14 +96,14 @@ def run_set(root: Path, work: Path, cfg: Config, one_core, grasps: bool = False)
             for m, p in preds.items():
                 rows[m].append(depth_metrics(p, gt, mask))
             if planner is not None:
-                write_depth(staged.output_path("repaired", fid), depth, frame.camera.depth_scale)
+                write_depth(scene.output_path("repaired", fid), depth, frame.camera.depth_scale)
                 with one_core():
                     t0 = time.perf_counter()
                     stages.grasp_frame(frame, planner, cfg.plane, "repaired")
                     t["grasp"] = time.perf_counter() - t0
-                judged.append(stages.evaluate_grasp_frame(staged, fid, cfg))
-            frames.append(staged.frame_key(fid))
-            print(staged.frame_key(fid), "IoU", [round(v, 2) for v in seg["best_iou"].values()],
+                judged.append(stages.evaluate_grasp_frame(scene, fid, cfg))
+            frames.append(scene.frame_key(fid))
+            print(scene.frame_key(fid), "IoU", [round(v, 2) for v in seg["best_iou"].values()],
                   "false", seg["false"], f"sr3d {rows['sr3d'][-1]['mae'] * 1000:.1f} mm",
                   f"raw {rows['raw'][-1]['mae'] * 1000:.1f} mm", f"{t['total']:.1f} s",
                   file=sys.stderr)
@@ -128,18 +125,18 @@ def run_set(root: Path, work: Path, cfg: Config, one_core, grasps: bool = False)
     return out
 
 
-def realdata_section(work: Path, cfg: Config, one_core) -> dict:
+def realdata_section(work: Path, cfg: Config) -> dict:
     root = SHARED / "realdata"
     if not root.is_dir():
         return {"skipped": f"{root} not present"}
-    return run_set(root, work / "realdata_nomask", cfg, one_core)
+    return run_set(root, work / "realdata_nomask", cfg)
 
 
-def extsim_section(work: Path, cfg: Config, one_core) -> dict:
+def extsim_section(work: Path, cfg: Config) -> dict:
     root = SHARED / "extsim"
     if not root.is_dir():
         return {"skipped": f"{root} not present"}
-    return run_set(root, work / "extsim", cfg, one_core, grasps=True)
+    return run_set(root, work / "extsim", cfg, grasps=True)
 
 
 def report(results: dict) -> list[str]:

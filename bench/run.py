@@ -1,6 +1,7 @@
 """``make bench``: depth repair compared with raw depth and simple baselines; pose errors; timing.
 
-Not a test: it measures and writes bench/RESULTS.md (and bench/results.json, bench/mae.png).
+Not a test: it measures and writes bench/RESULTS.md (and bench/results.json, bench/mae.png), one
+section of results per entry of :data:`SECTIONS` (``python bench/run.py --list``).
 Synthetic set: seed 700 (no test uses it), one frame per scene. Real set: ../shared/realdata with
 the given masks imported (skipped with a reason when absent).
 """
@@ -16,15 +17,15 @@ import os
 for _threads in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_threads, "1")
 
-import hashlib
 import json
 import shutil
 import sys
 import time
-from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
-import cv2
+import click
 import numpy as np
 
 from sr3d_cli.align import Aligner
@@ -32,65 +33,18 @@ from sr3d_cli.config import Config, IOConfig, SynthConfig
 from sr3d_cli.evaluate import depth_metrics, mean_metrics
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.pipeline import Pipeline
+from sr3d_cli.pose_error import METRICS as POSE_METRICS, pose_error
 from sr3d_cli.render import make_renderer
 from sr3d_cli.repair import inpaint_fill, plane_fill
 from sr3d_cli import stages
-from sr3d_cli.synth.generate import write_scene
 
-import generalise  # bench/generalise.py: the script's folder is on the path
+# bench/common.py and bench/generalise.py: the script's folder is on the path
+from common import (OTHER_CONTACTS, ROOT, SHARED, generated_set, one_core, staged,
+                    timed_repair)
+import generalise
+from report import plot, write_report
 
-ROOT = Path(__file__).resolve().parent
-REAL = ROOT.parent.parent / "shared" / "realdata" / "cleargrasp-real"
-
-
-def generated_set(folder: Path, count: int, cfg: SynthConfig, renderer) -> None:
-    """Make sure ``folder`` holds scenes 0..count-1 of ``cfg``'s seed as the current generator
-    draws them: a stamp of the generator's sources (sr3d_cli/synth, sr3d_cli/geometry) is kept
-    with the set, and a changed generator regenerates it instead of measuring stale scenes."""
-    package = ROOT.parent / "sr3d_cli"
-    digest = hashlib.sha256()
-    for path in sorted([*(package / "synth").glob("*.py"), *(package / "geometry").glob("*.py")]):
-        digest.update(path.read_bytes())
-    stamp = folder / "GENERATOR"
-    if folder.is_dir() and not (stamp.is_file() and stamp.read_text() == digest.hexdigest()):
-        shutil.rmtree(folder)
-    for i in range(count):
-        if not (folder / f"scene_{i:04d}" / "camera.json").is_file():
-            write_scene(folder / f"scene_{i:04d}", i, cfg, renderer)
-    folder.mkdir(parents=True, exist_ok=True)
-    stamp.write_text(digest.hexdigest())
-
-
-@contextmanager
-def one_core():
-    """This process pinned to one CPU core for the block (the targets' "on one core"): every
-    thread of it, as BLAS and OpenCV start their workers at import and a worker left on
-    another core still works or spins there (the main thread alone pinned, the grasp stage
-    used 1.4 s of CPU per 0.7 s; threads started in the block inherit the pin)."""
-    tasks = sorted(int(t) for t in os.listdir("/proc/self/task")) \
-        if os.path.isdir("/proc/self/task") else [0]
-    before = {t: os.sched_getaffinity(t) for t in tasks}
-    core = {min(before[tasks[0]])}
-    for t in tasks:
-        os.sched_setaffinity(t, core)
-    threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)  # OpenCV's pool, sized at import for every core
-    try:
-        yield
-    finally:
-        cv2.setNumThreads(threads)
-        for t, cores in before.items():
-            try:
-                os.sched_setaffinity(t, cores)
-            except OSError:  # the thread has ended
-                pass
-
-
-def _rotation_error(R, R_gt, symmetric: bool) -> float:
-    if symmetric:
-        return float(np.degrees(np.arccos(np.clip(R[:, 2] @ R_gt[:, 2], -1, 1))))
-    c = (np.trace(R.T @ R_gt) - 1) / 2
-    return float(np.degrees(np.arccos(np.clip(c, -1, 1))))
+REAL = SHARED / "realdata" / "cleargrasp-real"
 
 
 def run_methods(source, fid, cfg_default: Config, cfg_paper: Config, work: Path, masks: str,
@@ -100,8 +54,7 @@ def run_methods(source, fid, cfg_default: Config, cfg_paper: Config, work: Path,
     out = {"raw": frame.depth_m}
     gt_mask_path = source.gt_mask_path(fid)
     for name, cfg in (("sr3d", cfg_default), ("paper", cfg_paper)):
-        scene = type(source)(source.root, out=work / name / source.name, name=source.name,
-                             io=source.io)
+        scene = staged(source, work / name / source.name)
         f = scene.load_frame(fid)
         pipe = Pipeline(cfg)
         t = {}
@@ -112,12 +65,7 @@ def run_methods(source, fid, cfg_default: Config, cfg_paper: Config, work: Path,
             inst = from_masks([ids == k for k in np.unique(ids) if k > 0],
                               [1.0] * (len(np.unique(ids)) - 1), ids.shape, "glass", 1)
             stages.write_instances(scene, fid, inst, "import")
-        start = time.perf_counter()
-        pipe.ensure_upstream(f, t)
-        t0 = time.perf_counter()
-        depth, ids = pipe.repaired_depth(f)
-        t["render"] = time.perf_counter() - t0
-        t["total"] = time.perf_counter() - start
+        depth, ids = timed_repair(pipe, f, t)
         timings.setdefault(name, []).append(t)
         out[name] = depth
         if name == "sr3d":
@@ -130,10 +78,9 @@ def run_methods(source, fid, cfg_default: Config, cfg_paper: Config, work: Path,
 
 
 def pose_errors(source, fid, aligner, plane_cfg) -> list[dict]:
-    """Align alone: ground-truth masks and meshes, pose against the truth."""
+    """Align alone: ground-truth masks and meshes, pose against the truth
+    (:func:`sr3d_cli.pose_error.pose_error`); ``seconds``: the aligner's."""
     import trimesh
-
-    from sr3d_cli.align.view_matching import is_axisymmetric
 
     frame = source.load_frame(fid)
     ids = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
@@ -151,12 +98,10 @@ def pose_errors(source, fid, aligner, plane_cfg) -> list[dict]:
         except ValueError as exc:
             rows.append({"label": obj["label"], "failed": str(exc)})
             continue
-        T = np.asarray(obj["T_cam_obj"])
+        seconds = time.perf_counter() - t
+        error = pose_error(p.T_cam_obj, p.scale, mesh, obj["T_cam_obj"], obj["scale"], mesh)
         rows.append({"label": obj["label"], "pose": obj["pose"],
-                     "rotation_deg": _rotation_error(p.R, T[:3, :3], is_axisymmetric(mesh)),
-                     "translation_mm": 1000 * float(np.linalg.norm(p.t - T[:3, 3])),
-                     "scale_pct": 100 * abs(p.scale / obj["scale"] - 1),
-                     "seconds": time.perf_counter() - t})
+                     **{k: error[k] for k in POSE_METRICS}, "seconds": seconds})
     return rows
 
 
@@ -176,9 +121,6 @@ def _planners(cfg: Config) -> list:
         grasp_cfg.seed = seed
         planners.append(Planner(grasp_cfg))
     return planners
-
-
-OTHER_CONTACTS = ("pads", "line")  # contact models judged beside the default grid of rays
 
 
 def _over_draws(by_draw: list[list[dict]], by_class: bool = True) -> dict:
@@ -246,16 +188,15 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
     raw_frames, seconds = [], []
     for source in discover_scenes(synth, IOConfig(), None):
         fid = "000000"
-        staged = type(source)(source.root, out=work / "synthetic" / "sr3d" / source.name,
-                              name=source.name, io=source.io)
-        frame = staged.load_frame(fid)
+        repaired = staged(source, work / "synthetic" / "sr3d" / source.name)
+        frame = repaired.load_frame(fid)
         depth, _ = Pipeline(cfg).repaired_depth(frame)
-        write_depth(staged.output_path("repaired", fid), depth, frame.camera.depth_scale)
-        seconds += _plan_draws(staged, fid, planners, by_draw, cfg)
-        raw = type(source)(source.root, out=work / "grasp_raw" / source.name, name=source.name,
-                           io=source.io)
+        write_depth(repaired.output_path("repaired", fid), depth, frame.camera.depth_scale)
+        seconds += _plan_draws(repaired, fid, planners, by_draw, cfg)
+        raw = staged(source, work / "grasp_raw" / source.name)
         (raw.out / "masks").mkdir(parents=True, exist_ok=True)
-        shutil.copy(staged.stage_file("masks", fid, (".png",)), raw.out / "masks" / f"{fid}.png")
+        shutil.copy(repaired.stage_file("masks", fid, (".png",)),
+                    raw.out / "masks" / f"{fid}.png")
         stages.grasp_frame(raw.load_frame(fid), planners[0], cfg.plane, "raw")
         raw_frames.append(_judged(raw, fid, cfg))
         print("grasp", source.name, f"repaired/0 top1 {by_draw[0][-1]['top1_success']:.2f}",
@@ -266,13 +207,7 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
 
 def _repair(pipeline: Pipeline, frame) -> np.ndarray:
     """Run the frame's missing stages and write its repaired depth; returns it, (H, W) m."""
-    from sr3d_cli.io.images import write_depth
-
-    pipeline.ensure_upstream(frame)
-    depth, _ = pipeline.repaired_depth(frame)
-    write_depth(frame.scene.output_path("repaired", frame.frame_id), depth,
-                frame.camera.depth_scale)
-    return depth
+    return timed_repair(pipeline, frame, {}, write=True)[0]
 
 
 def _object_metrics(source, fid: str, depth: np.ndarray) -> dict:
@@ -515,8 +450,6 @@ def speed_bench(work: Path, frames: int = 12) -> dict:
     701), default backends, this process pinned to one CPU core. Per-stage seconds per frame
     as ``sr3d repair-depth`` runs them (the repaired PNG written), median over ``frames``
     frames; one frame before them loads everything and is not counted."""
-    from sr3d_cli.io.images import write_depth
-
     scenes, out = work / "speed_in", work / "speed_out"
     cfg = SynthConfig(seed=701, views=1, resolutions=["640x480"], objects=[1, 1],
                       distractors=[0, 0])
@@ -527,17 +460,9 @@ def speed_bench(work: Path, frames: int = 12) -> dict:
         for i in range(frames + 1):
             name = f"scene_{i:04d}"
             src, = discover_scenes(scenes / name, IOConfig(), None)
-            scene = type(src)(src.root, out=out / name, name=name, io=src.io)
-            frame = scene.load_frame("000000")
+            frame = staged(src, out / name).load_frame("000000")
             t = {}
-            start = time.perf_counter()
-            pipe.ensure_upstream(frame, t)
-            t0 = time.perf_counter()
-            depth, _ = pipe.repaired_depth(frame)
-            write_depth(scene.output_path("repaired", "000000", ".png"), depth,
-                        frame.camera.depth_scale)
-            t["render"] = time.perf_counter() - t0
-            t["total"] = time.perf_counter() - start
+            depth, _ = timed_repair(pipe, frame, t, write=True)
             gt = src.load_gt_depth("000000", depth.shape)
             mask = src.load_mask(src.gt_mask_path("000000"), depth.shape) > 0
             t["mae"] = depth_metrics(depth, gt, mask)["mae"]
@@ -606,314 +531,149 @@ def mesh_bench(synth: Path) -> dict:
     return result
 
 
-SECTIONS = ("realdata", "extsim", "depth", "poses", "grasp", "heldout", "scale", "speed", "mesh")
-OPTIONAL = ("breakdown",)  # run only when named: bench/run.py breakdown
+METHODS = ("raw", "plane-fill", "inpaint", "paper", "sr3d")  # depth section, in table order
+SYNTH_SEED, SYNTH_FRAMES = 700, 24  # the set sr3d's parameters were tuned on (no test uses it)
 
 
-def main(frames: int = 24, sections: tuple[str, ...] = SECTIONS) -> None:
-    work = ROOT / "work"
-    synth = work / "synth700"
-    cfg = SynthConfig(seed=700, views=1)
-    renderer = make_renderer("auto")
-    generated_set(synth, frames, cfg, renderer)
-    default = Config()
-    paper = Config()
-    paper.align.mode = "paper"
-    paper.align.rolls = 4  # 162 viewpoints x 4 rolls: 12 rolls triples a run already ~10 min
-    previous = ROOT / "results.json"
-    results = json.loads(previous.read_text()) if previous.is_file() else {}
-    for key in ("synthetic", "real", "timings", *SECTIONS):  # the depth section's three
-        results.setdefault(key, {})
-    if "realdata" in sections:
-        results["realdata"] = generalise.realdata_section(work, default, one_core)
-    if "extsim" in sections:
-        results["extsim"] = generalise.extsim_section(work, default, one_core)
-    methods = ("raw", "plane-fill", "inpaint", "paper", "sr3d")
-    for label, root, masks in (("synthetic", synth, "segment"), ("real", REAL, "import")):
-        if "depth" not in sections:
-            break
-        shutil.rmtree(work / label, ignore_errors=True)  # stage outputs: time every stage
+@dataclass
+class Bench:
+    """What the sections share: the work folder, the seed-700 set in it, the default config
+    and the paper-mode one (``align.mode: paper``), the renderer."""
+
+    work: Path
+    synth: Path
+    default: Config
+    paper: Config
+    renderer: object
+
+    @classmethod
+    def prepare(cls, work: Path) -> "Bench":
+        synth = work / f"synth{SYNTH_SEED}"
+        renderer = make_renderer("auto")
+        generated_set(synth, SYNTH_FRAMES, SynthConfig(seed=SYNTH_SEED, views=1), renderer)
+        paper = Config()
+        paper.align.mode = "paper"
+        paper.align.rolls = 4  # 162 viewpoints x 4 rolls: 12 rolls triples a run already ~10 min
+        return cls(work, synth, Config(), paper, renderer)
+
+
+def depth_section(bench: Bench) -> dict:
+    """Every method of :data:`METHODS` on the seed-700 set (sr3d's own masks) and on the real
+    ClearGrasp frames (true masks imported): mean depth metrics, median MAE, stage timings."""
+    results: dict = {"timings": {}}
+    for label, root, masks in (("synthetic", bench.synth, "segment"), ("real", REAL, "import")):
+        work = bench.work / label
+        shutil.rmtree(work, ignore_errors=True)  # stage outputs: time every stage
         if not root.is_dir():
             results[label] = {"skipped": f"{root} not present"}
             continue
-        rows = {m: [] for m in methods}
+        rows = {m: [] for m in METHODS}
         timings: dict = {}
-        for source in discover_scenes(root, IOConfig(), work / label):
+        for source in discover_scenes(root, IOConfig(), work):
             for fid in source.frame_ids():
-                preds = run_methods(source, fid, default, paper, work / label, masks, timings)
-                frame = source.load_frame(fid)
-                gt = source.load_gt_depth(fid, frame.depth_m.shape)
-                mask = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape) > 0
-                for m in methods:
-                    rows[m].append(depth_metrics(preds[m], gt, mask))
+                preds = run_methods(source, fid, bench.default, bench.paper, work, masks,
+                                    timings)
+                for m in METHODS:
+                    rows[m].append(_object_metrics(source, fid, preds[m]))
                 print(label, source.frame_key(fid), " ".join(
-                    f"{m}={rows[m][-1]['mae'] * 1000:.1f}mm" for m in methods), file=sys.stderr)
-        results[label] = {m: mean_metrics(rows[m]) for m in methods}
+                    f"{m}={rows[m][-1]['mae'] * 1000:.1f}mm" for m in METHODS), file=sys.stderr)
+        results[label] = {m: mean_metrics(rows[m]) for m in METHODS}
         results[label]["median_mae"] = {m: float(np.median([r["mae"] for r in rows[m]]))
-                                        for m in methods}
+                                        for m in METHODS}
         results["timings"][label] = {
             name: {k: float(np.median([t.get(k, np.nan) for t in ts if k in t]))
                    for k in ("segment", "reconstruct", "align", "render", "total")
                    if any(k in t for t in ts)}
             for name, ts in timings.items()}
-    for mode in ("sr3d", "paper") if "poses" in sections else ():
-        c = Config().align if mode == "sr3d" else paper.align
-        aligner = Aligner(c)
+    return results
+
+
+def poses_section(bench: Bench) -> dict:
+    """Align alone in both modes on the seed-700 set (:func:`pose_errors`): medians."""
+    out = {}
+    for mode, cfg in (("sr3d", bench.default), ("paper", bench.paper)):
+        aligner = Aligner(cfg.align)
         rows = []
-        for source in discover_scenes(synth, IOConfig(), None):
-            rows += pose_errors(source, "000000", aligner, default.plane)
+        for source in discover_scenes(bench.synth, IOConfig(), None):
+            rows += pose_errors(source, "000000", aligner, bench.default.plane)
         ok = [r for r in rows if "failed" not in r]
-        results["poses"][mode] = {
-            "objects": len(rows), "failed": len(rows) - len(ok),
-            **{f"median_{k}": float(np.median([r[k] for r in ok]))
-               for k in ("rotation_deg", "translation_mm", "scale_pct", "seconds")}}
-    if "grasp" in sections:
-        results["grasp"] = grasp_bench(synth, work, default)
-    if "heldout" in sections:
-        results["heldout"] = heldout_bench(work, default, renderer)
-    if "scale" in sections:
-        results["scale"] = scale_bench(synth, work)
-    if "speed" in sections:
-        results["speed"] = speed_bench(work)
-    if "mesh" in sections:
-        results["mesh"] = mesh_bench(synth)
-    if "breakdown" in sections:
-        results["breakdown"] = breakdown_bench(work, default, renderer)
-    (ROOT / "results.json").write_text(json.dumps(results, indent=1,
-                                                  default=float))
-    write_report(results, methods)
-    plot(results, methods)
+        out[mode] = {"objects": len(rows), "failed": len(rows) - len(ok),
+                     **{f"median_{k}": float(np.median([r[k] for r in ok]))
+                        for k in (*POSE_METRICS, "seconds")}}
+    return {"poses": out}
 
 
-def _breakdown_report(breakdown: dict) -> list[str]:
-    if not breakdown:
-        return []
-    draws = len(next(iter(breakdown["conditions"].values()))["grasp"]["top1_by_draw"])
-    lines = [f"## where grasps are lost (study seed {breakdown['seed']}, `bench/run.py "
-             "breakdown`)", "",
-             f"{breakdown['frames']} generated frames; the same planner on the true meshes at "
-             "their true poses with the true depth, on sr3d's reconstruction and placement "
-             "from the true masks, and on the whole pipeline; judged as above, mean of "
-             f"{draws} draws. Depth over the true object masks.", "",
-             "| grasps planned on | objects | REL | MAE mm | top-1 | top-10 |" + _OTHER_HEAD,
-             "|---|---|---|---|---|---|" + _OTHER_RULE]
-    for name, c in breakdown["conditions"].items():
-        d, g = c["depth"], c["grasp"]
-        lines.append(f"| {name} | {g['objects']} | {d['rel']:.4f} | {1000 * d['mae']:.1f} | "
-                     f"{g['top1_success']:.3f} | {g['top10_success']:.3f} |{_others(g)}")
-    conditions = breakdown["conditions"]
-    lines += ["", "Top-1 by object class, contacts by the grid:", ""]
-    lines += _class_table({name: c["grasp"] for name, c in conditions.items()})
-    if all("merged" in c for c in conditions.values()):
-        m = next(iter(conditions.values()))["merged"]
-        lines += ["", "Top-1 of the objects sr3d's segmenter merged with another (its instance "
-                  "covers 30% of another object too) and of the rest, contacts by the grid:", "",
-                  "| objects | " + " | ".join(conditions) + " |", "|---|" + "---|" * len(conditions),
-                  f"| merged ({m['objects']}) | " + " | ".join(
-                      f"{c['merged']['top1_success']:.3f}" for c in conditions.values()) + " |",
-                  f"| the rest ({m['rest_objects']}) | " + " | ".join(
-                      f"{c['merged']['rest_top1_success']:.3f}" for c in conditions.values())
-                  + " |"]
-    if all("apart" in c for c in conditions.values()):
-        apart = next(iter(conditions.values()))["apart"]
-        first = apart["grid"]
-        lines += ["", "Top-1 of the objects only a pinch across the rim can hold (`rim_only`) and "
-                  "of the others, by each contact model:", "",
-                  "| objects | contacts | " + " | ".join(conditions) + " |",
-                  "|---|---|" + "---|" * len(conditions)]
-        for group in ("rim only", "others"):
-            for model in apart:
-                lines.append(f"| {group} ({first[group]['objects']}) | {model} | " + " | ".join(
-                    f"{c['apart'][model][group]['top1_success']:.3f}"
-                    for c in conditions.values()) + " |")
-    return lines + [""]
+@dataclass(frozen=True)
+class Section:
+    run: Callable[[Bench], dict]  # -> the entries of results.json it replaces
+    about: str
+    optional: bool = False  # run only when named
 
 
-def _class_table(columns: dict[str, dict]) -> list[str]:
-    """A table of top-1 by object class, one column per grasp summary in ``columns``."""
-    first = next(iter(columns.values())).get("top1_by_class", {})
-    if not first:
-        return ["(no classes: results.json predates them)"]
-    lines = ["| class | objects | " + " | ".join(columns) + " |",
-             "|---|---|" + "---|" * len(columns)]
-    for name, t in first.items():
-        cells = " | ".join(f"{g['top1_by_class'][name]['top1_success']:.3f}"
-                           if name in g.get("top1_by_class", {}) else "-"
-                           for g in columns.values())
-        lines.append(f"| {name} | {t['objects']} | {cells} |")
-    return lines
+# in the order they run: grasp plans on the depth section's stage outputs
+SECTIONS: dict[str, Section] = {
+    "realdata": Section(lambda b: {"realdata": generalise.realdata_section(b.work, b.default)},
+                        "real frames of ../shared/realdata, no masks given (headline)"),
+    "extsim": Section(lambda b: {"extsim": generalise.extsim_section(b.work, b.default)},
+                      "../shared/extsim, an independent renderer, grasps too (headline)"),
+    "depth": Section(depth_section, "depth of every method, seed 700 and the real ClearGrasp "
+                                    "frames with true masks"),
+    "poses": Section(poses_section, "align alone from true masks and meshes: pose error"),
+    "grasp": Section(lambda b: {"grasp": grasp_bench(b.synth, b.work, b.default)},
+                     "grasps on seed 700 (needs the depth section's outputs)"),
+    "heldout": Section(lambda b: {"heldout": heldout_bench(b.work, b.default, b.renderer)},
+                       f"the whole pipeline on the held-out seed {HELD_OUT_SEED} (totals only)"),
+    "scale": Section(lambda b: {"scale": scale_bench(b.synth, b.work)},
+                     "frames per second of sr3d repair-depth with 1 and 2 workers"),
+    "speed": Section(lambda b: {"speed": speed_bench(b.work)},
+                     "seconds per stage, one object, one core"),
+    "mesh": Section(lambda b: {"mesh": mesh_bench(b.synth)},
+                    "segmentation IoU and reconstruction Chamfer distance"),
+    "breakdown": Section(lambda b: {"breakdown": breakdown_bench(b.work, b.default,
+                                                                 b.renderer)},
+                         f"where grasps are lost, study seed {BREAKDOWN_SEED}", optional=True),
+}
+DEFAULT_SECTIONS = tuple(name for name, s in SECTIONS.items() if not s.optional)
 
 
-_OTHER_HEAD = "".join(f" {m}: top-1 | top-10 |" for m in OTHER_CONTACTS)
-_OTHER_RULE = "---|---|" * len(OTHER_CONTACTS)
+def run(sections: tuple[str, ...], out: Path) -> dict:
+    """Run ``sections`` (in :data:`SECTIONS` order) into ``out``/results.json, keeping the other
+    sections' results found there; write ``out``/RESULTS.md and ``out``/mae.png."""
+    bench = Bench.prepare(ROOT / "work")
+    previous = out / "results.json"
+    results = json.loads(previous.read_text()) if previous.is_file() else {}
+    for key in ("synthetic", "real", "timings", *SECTIONS):  # the depth section's three
+        results.setdefault(key, {})
+    for name, section in SECTIONS.items():
+        if name in sections:
+            results.update(section.run(bench))
+    out.mkdir(parents=True, exist_ok=True)
+    previous.write_text(json.dumps(results, indent=1, default=float))
+    write_report(results, METHODS, out)
+    plot(results, METHODS, out)
+    return results
 
 
-def _others(g: dict) -> str:
-    """Top-1 and top-10 by each of :data:`OTHER_CONTACTS` as more table cells."""
-    return "".join(f" {g[m]['top1_success']:.3f} | {g[m]['top10_success']:.3f} |"
-                   if m in g else " - | - |" for m in OTHER_CONTACTS)
+@click.command(context_settings={"help_option_names": ["-h", "--help"]})
+@click.argument("sections", nargs=-1, type=click.Choice(list(SECTIONS)), metavar="[SECTION]...")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=ROOT,
+              show_default="bench/", help="Folder of results.json, RESULTS.md and mae.png.")
+@click.option("--list", "show", is_flag=True, help="List the sections and exit.")
+def main(sections: tuple[str, ...], out: Path, show: bool) -> None:
+    """Measure sr3d: run SECTIONS (default: all but the optional ones) and rewrite the
+    report; the results of sections not run are kept from OUT/results.json.
 
-
-def write_report(results: dict, methods) -> None:
-    lines = ["# sr3d benchmark", "",
-             "Written by `make bench` (bench/run.py). The first two sections are the headline: "
-             "data sr3d was not built on (bench/generalise.py). The sections after them are "
-             "regression checks on sr3d's own generator, and the real frames with their true "
-             "masks given.", "",
-             *generalise.report(results),
-             "## own generator and real frames with true masks", "",
-             "Depth metrics over the ground-truth object "
-             "masks, holes counted with full error, mean over frames (median MAE separately). "
-             "Synthetic: 24 frames, seed 700, full default pipeline (training-free segment -> "
-             "revolution reconstruct -> align -> repair). Real: the two ClearGrasp frames of "
-             "../shared/realdata/cleargrasp-real, true masks imported. `paper` = same pipeline with `align.mode: "
-             "paper` (162 viewpoints x 4 rolls, to keep the run short).", ""]
-    for label in ("synthetic", "real"):
-        r = results[label]
-        lines.append(f"## {label}")
-        if "skipped" in r:
-            lines += [f"skipped: {r['skipped']}", ""]
-            continue
-        lines += ["", "| method | RMSE m | REL | MAE m | median MAE mm | d<1.05 % | d<1.10 % | "
-                      "d<1.25 % |", "|---|---|---|---|---|---|---|---|"]
-        for m in methods:
-            x = r[m]
-            lines.append(f"| {m} | {x['rmse']:.4f} | {x['rel']:.4f} | {x['mae']:.4f} | "
-                         f"{1000 * r['median_mae'][m]:.1f} | {x['delta_1.05']:.1f} | "
-                         f"{x['delta_1.10']:.1f} | {x['delta_1.25']:.1f} |")
-        lines.append("")
-        for name, t in results["timings"].get(label, {}).items():
-            lines.append(f"- median seconds per frame, {name}: " + ", ".join(
-                f"{k} {v:.3f}" for k, v in t.items()))
-        lines.append("")
-    lines += ["## align alone (synthetic, ground-truth masks and meshes)", "",
-              "| mode | objects | failed | rotation deg | translation mm | scale % | s/object |",
-              "|---|---|---|---|---|---|---|"]
-    for mode, p in results["poses"].items():
-        lines.append(f"| {mode} | {p['objects']} | {p['failed']} | {p['median_rotation_deg']:.2f} "
-                     f"| {p['median_translation_mm']:.1f} | {p['median_scale_pct']:.2f} | "
-                     f"{p['median_seconds']:.2f} |")
-    lines += ["", "Rotation error of axially symmetric objects is the axis angle. Medians.", ""]
-    grasp = results.get("grasp", {})
-    if grasp:
-        lines += ["## grasps (synthetic, sr3d's masks; judged on the true meshes)", "",
-                  f"Friction {grasp['friction']}: jaws closed on the true meshes, force closure, "
-                  "collisions with the true scene and table. Top-1: the best grasp of each true "
-                  "object (no grasp counts as a failure). Top-10: mean over frames of the 10 best "
-                  "grasps' success. Contacts by a grid of 6 x 3 rays on each pad; the same "
-                  "grasps also judged by `pads` (each whole flat pad's exact first touch, a corner "
-                  "it presses on taking its normal) and "
-                  "`line` (one ray per jaw on the closing line through the grasp centre, as "
-                  "GraspNet-1Billion's metric); see `sr3d_cli/grasp/quality.py`.", "",
-                  "| planned on | objects | with grasps | top-1 success | top-10 success |"
-                  + _OTHER_HEAD, "|---|---|---|---|---|" + _OTHER_RULE]
-        for name in ("repaired", "raw"):
-            g = grasp[name]
-            lines.append(f"| {name} | {g['objects']} | {g['objects_with_grasps']:g} | "
-                         f"{g['top1_success']:.3f} | {g['top10_success']:.3f} |{_others(g)}")
-        by_draw = ", ".join(f"{v:.3f}" for v in grasp["repaired"].get("top1_by_draw", []))
-        lines += ["", f"- repaired: the mean of {len(grasp['repaired'].get('top1_by_draw', []))} "
-                  f"random draws of seed points (`grasp.seed` 0, 1, ...); top-1 by draw: "
-                  f"{by_draw}; raw: draw 0",
-                  f"- grasp stage, median seconds per frame on one core: "
-                  f"{grasp['median_seconds']:.3f}", "",
-                  "Top-1 on the repaired scene by object class, by each contact model:", ""]
-        g = grasp["repaired"]
-        lines += _class_table({"grid": g, **{m: g[m] for m in OTHER_CONTACTS if m in g}}) + [""]
-    held = results.get("heldout", {})
-    if held:
-        d, g = held["depth"], held["grasp"]
-        lines += [f"## held-out set (seed {held['seed']}: read only as these totals)", "",
-                  f"{held['frames']} generated frames, the whole default pipeline from the raw "
-                  "frame (sr3d's own masks) to grasps, judged as above. The seed-700 set above "
-                  "is the one sr3d's parameters were tuned on and seed 900 the one failures are "
-                  "studied on; expect these numbers on new frames.", "",
-                  "| objects | REL | MAE mm | median MAE mm | grasp top-1 | top-10 |"
-                  + _OTHER_HEAD, "|---|---|---|---|---|---|" + _OTHER_RULE,
-                  f"| {g['objects']} | {d['rel']:.4f} | {1000 * d['mae']:.1f} | "
-                  f"{1000 * held['median_mae']:.1f} | {g['top1_success']:.3f} | "
-                  f"{g['top10_success']:.3f} |{_others(g)}", "",
-                  "- grasp top-1 by draw: " + ", ".join(f"{v:.3f}" for v in g["top1_by_draw"])]
-        apart = held.get("grasp_apart")
-        if apart:
-            rim, rest = apart["rim only"], apart["others"]
-            lines += [f"- top-1 of the {rim['objects']} objects only a pinch across the rim can "
-                      f"hold (beakers and glasses wider than the opening less its margins, lying "
-                      f"ones also longer; `rim_only`): {rim['top1_success']:.3f}; of the other "
-                      f"{rest['objects']}: {rest['top1_success']:.3f}"]
-        lines += [""]
-    lines += _breakdown_report(results.get("breakdown", {}))
-    mesh = results.get("mesh", {})
-    if mesh:
-        lines += ["## segmentation and reconstruction (default backends)", "",
-                  "Segmentation: best IoU of each ground-truth instance; detected = IoU > 0.5; "
-                  "precision = share of predicted instances with IoU > 0.5 against some "
-                  "ground-truth instance (the rest are false detections or fragments). "
-                  "Reconstruction: ground-truth masks and support plane, symmetric Chamfer "
-                  "distance / height against the true mesh (both at unit height), median.", "",
-                  "| set | instances | mean IoU | detection % | predicted | precision % |",
-                  "|---|---|---|---|---|---|"]
-        for label in ("synthetic", "real"):
-            m = mesh.get(label, {})
-            if "skipped" in m or not m:
-                lines.append(f"| {label} | skipped: {m.get('skipped', 'not run')} | | | | |")
-                continue
-            lines.append(f"| {label} | {m['instances']} | {m['mean_iou']:.3f} | "
-                         f"{100 * m['detection']:.1f} | {m.get('predicted', '-')} | "
-                         + (f"{100 * m['precision']:.1f} |" if "precision" in m else "- |"))
-        lines += ["", "| resting | objects | median Chamfer / height % |", "|---|---|---|"]
-        for k, v in mesh.get("shape", {}).items():
-            lines.append(f"| {k} | {v['objects']} | {100 * v['median_chamfer_per_height']:.2f} |")
-        lines.append("")
-    scale = results.get("scale", {})
-    if scale:
-        lines += ["## batch throughput (`sr3d repair-depth --workers N`)", "",
-                  f"{scale['frames']} synthetic frames (one scene folder each), a fresh `sr3d` "
-                  f"process per run (start-up included), median of {scale['repeats']} runs.", "",
-                  "| workers | seconds | frames/s |", "|---|---|---|"]
-        for w in (1, 2):
-            x = scale[f"workers_{w}"]
-            lines.append(f"| {w} | {x['seconds']:.1f} | {x['fps']:.2f} |")
-        lines += ["", f"- speed-up with 2 workers: {scale['speedup']:.2f}x", ""]
-    speed = results.get("speed", {})
-    if speed:
-        lines += ["## one object, one core (`sr3d repair-depth` stages)", "",
-                  f"{speed['frames']} synthetic 640x480 frames with one glass object (seed 701), "
-                  "default backends, the process pinned to one CPU core, models loaded; median "
-                  "seconds per frame.", "",
-                  "| segment | reconstruct | align | render + write | total | MAE mm |",
-                  "|---|---|---|---|---|---|",
-                  f"| {speed['segment']:.3f} | {speed['reconstruct']:.3f} | {speed['align']:.3f} "
-                  f"| {speed['render']:.3f} | {speed['total']:.3f} | {1000 * speed['mae']:.1f} |",
-                  ""]
-    (ROOT / "RESULTS.md").write_text("\n".join(lines))
-
-
-def plot(results: dict, methods) -> None:
-    """Bar chart of MAE per method (mm), synthetic and real side by side."""
-    h, w = 320, 640
-    img = np.full((h, w, 3), 255, np.uint8)
-    sets = [k for k in ("synthetic", "real") if "skipped" not in results[k]]
-    values = [[results[s][m]["mae"] * 1000 for m in methods] for s in sets]
-    top = max(max(v) for v in values) if values else 1
-    colours = [(80, 80, 200), (200, 120, 60)]
-    for si, vals in enumerate(values):
-        for mi, v in enumerate(vals):
-            x = 40 + mi * 120 + si * 45
-            y = int(h - 50 - (h - 90) * v / top)
-            cv2.rectangle(img, (x, y), (x + 40, h - 50), colours[si], -1)
-            cv2.putText(img, f"{v:.0f}", (x, y - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1)
-    for mi, m in enumerate(methods):
-        cv2.putText(img, m, (40 + mi * 120, h - 25), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1)
-    cv2.putText(img, "MAE mm: " + " / ".join(sets), (10, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
-                (0, 0, 0), 1)
-    cv2.imwrite(str(ROOT / "mae.png"), img)
+    \b
+    Example:
+      python bench/run.py grasp heldout
+    """
+    if show:
+        for name, section in SECTIONS.items():
+            click.echo(f"{name:10s} {section.about}"
+                       + ("  [only when named]" if section.optional else ""))
+        return
+    run(sections or DEFAULT_SECTIONS, out)
 
 
 if __name__ == "__main__":
-    # sections to run (default all): depth poses grasp heldout scale speed mesh; others' results
-    # are kept
-    unknown = set(sys.argv[1:]) - set(SECTIONS + OPTIONAL)
-    if unknown:
-        sys.exit(f"unknown section(s) {sorted(unknown)}; choose from {SECTIONS + OPTIONAL}")
-    main(sections=tuple(sys.argv[1:]) or SECTIONS)
+    main()

@@ -3,7 +3,17 @@
 Precedence, lowest first: built-in defaults < YAML file < ``--set section.key=value`` < explicit
 command-line flags. Unknown sections or keys and values of the wrong type raise
 :class:`~sr3d_cli.errors.ConfigError` naming the key and where it came from.
-``configs/default.yaml`` lists every key with a comment; a test keeps it equal to these defaults.
+
+Which keys a user sees: a key is user-facing when it picks a backend or a model file, describes
+the hardware (camera and depth I/O, the gripper, friction), chooses inputs, outputs or how to
+evaluate, or is a threshold a user sets for their scenes (such as ``segment.min_score``); every
+other key is a tuning constant of an algorithm, listed in :data:`ADVANCED`. The YAML layout
+(:func:`to_layout`, ``configs/default.yaml``) keeps the tuning constants apart, in an
+``advanced:`` section of ``{section: {key: value}}``; they are set there or with ``--set
+advanced.section.key=value``, and ``section.key`` names them too. Either way they land on the same
+dataclass field (``cfg.segment.close_radius``), so the code and the stage outputs' provenance
+records know every key by ``section.key``. ``configs/default.yaml`` lists every key with a
+comment; a test keeps it equal to these defaults.
 """
 
 from __future__ import annotations
@@ -17,6 +27,7 @@ from typing import Any, Mapping
 
 import yaml
 
+from sr3d_cli.backends import REGISTRIES
 from sr3d_cli.errors import ConfigError
 
 
@@ -214,11 +225,34 @@ class Config:
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
 
 
+ADVANCED_SECTION = "advanced"
+# the tuning constants of each section (see the module docstring); every other key is user-facing
+ADVANCED: dict[str, tuple[str, ...]] = {
+    "plane": ("threshold", "iterations", "min_share"),
+    "segment": ("close_radius", "rough_factor", "grabcut_iterations", "max_object_share"),
+    "reconstruct": ("levels", "iterations", "sections", "lying_margin", "use_depth", "depth_vote",
+                    "axial_view", "smooth", "straight_wall", "open_top_ratio", "open_wall",
+                    "open_base", "open_explains"),
+    "align": ("views", "rolls", "yaw_steps", "max_rests", "alpha", "beta", "gamma", "patches",
+              "contact_points", "top_candidates", "upright_prior", "hint_accept", "refine",
+              "refine_evals", "refine_hint", "use_depth", "depth_inlier", "depth_min_share",
+              "depth_min_points", "depth_samples", "depth_max_change", "depth_search",
+              "depth_vote", "depth_agree", "window"),
+    "grasp": ("depths", "seed_bins", "redraws", "height_tolerance", "tilt_tolerance",
+              "approaches", "pair_radius", "contact_band", "collision_points",
+              "collision_margin", "tight_margins", "fallback_friction", "mesh_points", "stride",
+              "nms_distance", "nms_angle", "friction_weight", "width_weight", "approach_weight",
+              "centre_weight", "run_scale", "junction_drop", "end_weight", "end_band"),
+}
+
+
+def is_advanced(section: str, key: str) -> bool:
+    return key in ADVANCED.get(section, ())
+
+
 CHOICES: dict[str, tuple[str, ...]] = {
     "io.format": ("auto", "native", "cleargrasp", "transcg", "bop"),
-    "render.backend": ("auto", "pyrender", "numpy"),
-    "segment.backend": ("training-free", "sam-onnx", "import"),
-    "reconstruct.backend": ("revolution", "onnx", "library"),
+    **{registry.key: registry.names for registry in REGISTRIES},
     "align.mode": ("sr3d", "paper"),
     "repair.outside_render": ("nearest", "keep", "plane"),
     "grasp.source": ("repaired", "raw"),
@@ -261,9 +295,10 @@ ORDERED_PAIRS = ("synth.objects", "synth.distractors", "synth.distance", "synth.
                  "synth.hole_fraction", "synth.see_through_fraction")
 
 
-def _check_range(value: Any, key: str, origin: str) -> None:
-    """Raise :class:`ConfigError` naming ``key`` where a number of ``value`` is out of range."""
-    where = f"'{key}' in {origin}"
+def _check_range(value: Any, key: str, origin: str, named: str | None = None) -> None:
+    """Raise :class:`ConfigError` naming ``key`` (as ``named``, where the user wrote it so)
+    where a number of ``value`` is out of range."""
+    where = f"'{named or key}' in {origin}"
     numbers = value if isinstance(value, list) else [value]
     if key in ORDERED_PAIRS and (len(numbers) != 2 or numbers[0] > numbers[1]):
         raise ConfigError(f"{where}: expected [min, max] with min <= max, got {value!r}")
@@ -315,56 +350,92 @@ def _section_types(section_cls: type) -> dict[str, Any]:
 
 
 def apply_mapping(cfg: Config, data: Mapping[str, Any], origin: str) -> Config:
-    """Return a copy of ``cfg`` with ``data`` ({section: {key: value}}) applied, checked."""
+    """Return a copy of ``cfg`` with ``data`` applied, checked: ``{section: {key: value}}``,
+    the tuning constants also as ``{"advanced": {section: {key: value}}}``."""
     if data is None:
         return cfg
     if not isinstance(data, Mapping):
         raise ConfigError(f"{origin}: expected a mapping of sections, got {type(data).__name__}")
     cfg = dataclasses.replace(cfg)
     for section, values in data.items():
+        if section == ADVANCED_SECTION:
+            for inner, inner_values in _mapping(values, section, origin).items():
+                if inner not in ADVANCED:
+                    raise ConfigError(f"unknown section '{section}.{inner}' in {origin} (the "
+                                      f"advanced sections: {', '.join(ADVANCED)})")
+                _apply_section(cfg, inner, _mapping(inner_values, f"{section}.{inner}", origin),
+                               origin, advanced=True)
+            continue
         if section not in {f.name for f in dataclasses.fields(Config)}:
             raise ConfigError(f"unknown section '{section}' in {origin}")
-        if values is None:
-            continue
-        if not isinstance(values, Mapping):
-            raise ConfigError(f"section '{section}' in {origin}: expected a mapping")
-        current = getattr(cfg, section)
-        hints = _section_types(type(current))
-        updates = {}
-        for key, value in values.items():
-            full = f"{section}.{key}"
-            if key not in hints:
-                raise ConfigError(f"unknown key '{full}' in {origin}")
-            value = _coerce(value, hints[key], full, origin)
-            if full in CHOICES and value not in CHOICES[full]:
-                raise ConfigError(
-                    f"'{full}' in {origin}: {value!r} is not one of {', '.join(CHOICES[full])}"
-                )
-            if full == "reconstruct.masks" and not value:
-                raise ConfigError(f"'{full}' in {origin}: expected segment, gt or a folder")
-            if full == "synth.resolutions":
-                for item in value:
-                    w, x, h = item.partition("x")
-                    if not (x and w.isdigit() and h.isdigit() and int(w) > 0 and int(h) > 0):
-                        raise ConfigError(f"'{full}' in {origin}: expected WIDTHxHEIGHT such "
-                                          f"as 640x480, got {item!r}")
-            _check_range(value, full, origin)
-            updates[key] = value
-        setattr(cfg, section, dataclasses.replace(current, **updates))
+        _apply_section(cfg, section, _mapping(values, section, origin), origin)
     return cfg
 
 
+def _mapping(values: Any, name: str, origin: str) -> Mapping:
+    """``values`` of section ``name``: a mapping ({} for an empty section)."""
+    if values is None:
+        return {}
+    if not isinstance(values, Mapping):
+        raise ConfigError(f"section '{name}' in {origin}: expected a mapping")
+    return values
+
+
+def _apply_section(cfg: Config, section: str, values: Mapping, origin: str,
+                   advanced: bool = False) -> None:
+    """Check ``values`` ({key: value}) of ``section`` and set them on ``cfg`` (in place);
+    ``advanced``: they came from the advanced section, which holds tuning constants only."""
+    current = getattr(cfg, section)
+    hints = _section_types(type(current))
+    updates = {}
+    for key, value in values.items():
+        full = f"{section}.{key}"
+        named = f"{ADVANCED_SECTION}.{full}" if advanced else full  # as the user wrote it
+        if key not in hints:
+            raise ConfigError(f"unknown key '{named}' in {origin}")
+        if advanced and not is_advanced(section, key):
+            raise ConfigError(f"'{named}' in {origin}: {full} is a user-facing key, set under "
+                              f"'{section}:' (not '{ADVANCED_SECTION}:')")
+        value = _coerce(value, hints[key], named, origin)
+        if full in CHOICES and value not in CHOICES[full]:
+            raise ConfigError(
+                f"'{named}' in {origin}: {value!r} is not one of {', '.join(CHOICES[full])}"
+            )
+        if full == "reconstruct.masks" and not value:
+            raise ConfigError(f"'{named}' in {origin}: expected segment, gt or a folder")
+        if full == "synth.resolutions":
+            for item in value:
+                w, x, h = item.partition("x")
+                if not (x and w.isdigit() and h.isdigit() and int(w) > 0 and int(h) > 0):
+                    raise ConfigError(f"'{named}' in {origin}: expected WIDTHxHEIGHT such "
+                                      f"as 640x480, got {item!r}")
+        _check_range(value, full, origin, named)
+        updates[key] = value
+    setattr(cfg, section, dataclasses.replace(current, **updates))
+
+
 def parse_set(item: str) -> tuple[str, str, Any]:
-    """Split ``section.key=value``; the value is parsed as YAML (so 0.5, true, [1, 2] work)."""
+    """Split ``section.key=value`` (``advanced.section.key=value``: section ``advanced``, name
+    ``section.key``); the value is parsed as YAML (so 0.5, true, [1, 2] work)."""
     key, sep, raw = item.partition("=")
     section, dot, name = key.strip().partition(".")
     if not sep or not dot or not section or not name:
         raise ConfigError(f"--set {item!r}: expected section.key=value")
+    if section == ADVANCED_SECTION and not all(name.partition(".")[::2]):
+        raise ConfigError(f"--set {item!r}: expected {ADVANCED_SECTION}.section.key=value")
     try:
         value = yaml.safe_load(raw) if raw.strip() else ""
     except yaml.YAMLError as exc:
         raise ConfigError(f"--set {item!r}: value is not valid YAML ({exc})") from None
     return section, name, value
+
+
+def _nested(section: str, name: str, value: Any) -> dict:
+    """The mapping :func:`apply_mapping` takes for one key named ``section.name``."""
+    if section == ADVANCED_SECTION:
+        inner, _, key = name.partition(".")
+        return {section: {inner: {key: value}}}
+    return {section: {name: value}}
 
 
 def load_yaml(path: str | Path) -> dict:
@@ -392,9 +463,9 @@ def build_config(
     Parameters
     ----------
     path : path, optional
-        YAML file of ``{section: {key: value}}``.
+        YAML file of ``{section: {key: value}}`` (and ``advanced: {section: {key: value}}``).
     sets : iterable of str
-        ``section.key=value`` items, applied in order.
+        ``section.key=value`` (or ``advanced.section.key=value``) items, applied in order.
     flags : mapping of 'section.key' -> value, optional
         Values of command-line flags; ``None`` means the flag was not given.
     """
@@ -402,8 +473,7 @@ def build_config(
     if path is not None:
         cfg = apply_mapping(cfg, load_yaml(path), str(path))
     for item in sets:
-        section, name, value = parse_set(item)
-        cfg = apply_mapping(cfg, {section: {name: value}}, "--set")
+        cfg = apply_mapping(cfg, _nested(*parse_set(item)), "--set")
     for full, value in (flags or {}).items():
         if value is None:
             continue
@@ -416,4 +486,18 @@ def build_config(
 
 
 def to_dict(cfg: Config) -> dict:
+    """Every key by its section: ``{section: {key: value}}``, as the code reads them."""
     return dataclasses.asdict(cfg)
+
+
+def to_layout(cfg: Config) -> dict:
+    """The YAML layout of ``configs/default.yaml``: the user-facing keys by section (a section
+    without any left out), then the tuning constants under ``advanced: {section: {key:
+    value}}``."""
+    flat = to_dict(cfg)
+    layout: dict = {section: {k: v for k, v in values.items() if not is_advanced(section, k)}
+                    for section, values in flat.items()
+                    if any(not is_advanced(section, k) for k in values)}
+    layout[ADVANCED_SECTION] = {section: {k: flat[section][k] for k in keys}
+                                for section, keys in ADVANCED.items()}
+    return layout

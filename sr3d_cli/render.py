@@ -311,22 +311,21 @@ class PyrenderRenderer(Renderer):
 _CACHE: dict[str, Renderer] = {}
 
 
+def auto_renderer() -> Renderer:
+    """pyrender, else the numpy fallback with one notice (no GL context)."""
+    try:
+        return PyrenderRenderer()
+    except Exception as exc:  # no GL context, no EGL/OSMesa library, broken driver...
+        log.warning("notice: no OpenGL context (%s: %s); rendering with the numpy fallback",
+                    type(exc).__name__, str(exc).splitlines()[0] if str(exc) else "")
+        return NumpyRenderer()
+
+
 def make_renderer(backend: str = "auto") -> Renderer:
-    """``"pyrender"``, ``"numpy"`` or ``"auto"`` (pyrender, else numpy with one notice)."""
-    if backend in _CACHE:
-        return _CACHE[backend]
-    if backend == "numpy":
-        renderer: Renderer = NumpyRenderer()
-    elif backend == "pyrender":
-        renderer = PyrenderRenderer()
-    elif backend == "auto":
-        try:
-            renderer = PyrenderRenderer()
-        except Exception as exc:  # no GL context, no EGL/OSMesa library, broken driver...
-            log.warning("notice: no OpenGL context (%s: %s); rendering with the numpy fallback",
-                        type(exc).__name__, str(exc).splitlines()[0] if str(exc) else "")
-            renderer = NumpyRenderer()
-    else:
-        raise ValueError(f"unknown render backend {backend!r}")
-    _CACHE[backend] = renderer
-    return renderer
+    """The renderer registered as ``backend`` (:data:`sr3d_cli.backends.RENDER`: ``pyrender``,
+    ``numpy`` or ``auto``), one per process."""
+    from sr3d_cli.backends import RENDER
+
+    if backend not in _CACHE:
+        _CACHE[backend] = RENDER.create(backend)
+    return _CACHE[backend]

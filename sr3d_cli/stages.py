@@ -198,7 +198,7 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str,
     seen = _with_opaque(frame, ids, plane)
     for k in sorted(records):
         try:
-            if plane is None and reconstructor.cfg.backend != "onnx":
+            if plane is None and reconstructor.needs_plane:
                 raise ValueError(why)
             front = None if plane is None else occluders(seen, k, frame.camera.K, plane)
             result = reconstructor(frame.rgb, ids == k, frame.camera.K, plane,

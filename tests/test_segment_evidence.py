@@ -217,12 +217,15 @@ class _FakeSam:
         return mask, 0.9
 
 
-def test_point_prompts_give_one_instance_each_and_min_score_drops_the_weak(tmp_path):
+def test_point_prompts_give_one_instance_each_and_min_score_drops_the_weak(tmp_path,
+                                                                          monkeypatch):
+    from sr3d_cli.segment import sam
+
     points = tmp_path / "points.json"
     points.write_text(json.dumps({"f": [[80, 30], [50, 60], [20, 20]]}))
     cfg = SegmentConfig(backend="sam-onnx", points=str(points), min_area=5, min_score=0.4)
-    segmenter = Segmenter.__new__(Segmenter)
-    segmenter.cfg, segmenter.plane_cfg, segmenter.sam = cfg, PlaneConfig(), _FakeSam()
+    monkeypatch.setattr(sam, "SamOnnx", lambda encoder, decoder: _FakeSam())
+    segmenter = Segmenter(cfg, PlaneConfig())
     rgb = np.zeros((100, 120, 3), np.uint8)
     inst = segmenter("f", rgb, np.ones((100, 120)), K_TABLE)
     assert [o["score"] for o in inst.objects] == [0.8, 0.5]

@@ -67,6 +67,26 @@ def _csv(frames: dict[str, dict], means: dict[str, dict]) -> str:
     return "\n".join(rows) + "\n"
 
 
+def _pose_csv(frames: dict[str, dict], summary: dict) -> str:
+    """pose_metrics.csv: one row per true object, then the median and mean rows."""
+    from sr3d_cli.pose_error import METRICS
+
+    def cells(values) -> str:
+        return ",".join("" if v is None or (isinstance(v, float) and math.isnan(v))
+                        else f"{v:.6g}" if isinstance(v, float) else str(v) for v in values)
+
+    rows = ["frame,id,label,pred_id,iou,symmetric," + ",".join(METRICS)]
+    for key, frame in frames.items():
+        for r in frame["objects"]:
+            rows.append(f"{key}," + cells([r["id"], r["label"].replace(",", " "), r["pred_id"],
+                                           r.get("iou"), r.get("symmetric")]
+                                          + [r.get(m) for m in METRICS]))
+    for stat in ("median", "mean"):
+        rows.append(f"{stat},,,,,," + cells([summary[f"{stat}_{m}"] for m in METRICS]))
+    return "\n".join(rows) + "\n"
+
+
+
 @click.command()
 @click.argument("scene", type=click.Path(exists=True, file_okay=False))
 @click.option("--pred", "preds", multiple=True,
@@ -101,6 +121,9 @@ def evaluate(scene, preds, only_valid, mask_source, protocol, resolution, plot, 
     """Score depth predictions against ground truth over the transparent objects.
 
     Writes metrics.json and metrics.csv (to --out, else SCENE) and prints the mean table.
+    Where the scene has true poses (gt/objects) and placed objects (poses/ from align), also
+    scores each placed object's pose: rotation (the axis only for a surface of revolution),
+    translation, scale and ADD-S, into metrics.json and pose_metrics.csv.
     With --grasps, scores grasps instead (needs gt/objects: true meshes and poses).
 
     \b
@@ -112,6 +135,7 @@ def evaluate(scene, preds, only_valid, mask_source, protocol, resolution, plot, 
     if contacts:
         raise UsageExit("--contacts goes with --grasps")
     from sr3d_cli import evaluate as core
+    from sr3d_cli import pose_error
     from sr3d_cli.io.atomic import write_json, write_png, write_text
     from sr3d_cli.io.preview import error_map_figure
 
@@ -138,6 +162,7 @@ def evaluate(scene, preds, only_valid, mask_source, protocol, resolution, plot, 
     check_writable(out_root)
     pairs = list(iter_frames(scenes, frames, report))
     per_frame: dict[str, dict] = {}
+    pose_frames: dict[str, dict] = {}
     for source, frame_id in tqdm(pairs, desc="evaluate", unit="frame",
                                  disable=ctx.meta["sr3d.quiet"]):
         key = source.frame_key(frame_id)
@@ -152,10 +177,13 @@ def evaluate(scene, preds, only_valid, mask_source, protocol, resolution, plot, 
                                              max_error=ev.plot_max_error), ev.plot_max_error)
                     write_png(source.out / "eval_plots" / Path(pred).name / f"{frame_id}.png",
                               image)
+            poses = pose_error.evaluate_frame_poses(source, frame_id)
         except Exception as exc:
             report.fail(key, exc)
             continue
         per_frame[key] = result["preds"]
+        if poses is not None:
+            pose_frames[key] = poses
         report.ok()
     names = core.result_names(list(ev.pred), proto)
     means = {name: core.mean_metrics([f[name] for f in per_frame.values()]) for name in names}
@@ -175,9 +203,17 @@ def evaluate(scene, preds, only_valid, mask_source, protocol, resolution, plot, 
         "frames": per_frame,
         "failed": report.failures,
     }
+    pose_summary = None
+    if pose_frames:
+        pose_summary = pose_error.summarise([r for f in pose_frames.values()
+                                             for r in f["objects"]])
+        document["poses"] = {"method": pose_error.METHOD, "units": pose_error.UNITS,
+                             "summary": pose_summary, "frames": pose_frames}
     try:
         write_json(out_root / "metrics.json", _nan_to_none(document))
         write_text(out_root / "metrics.csv", _csv(per_frame, means))
+        if pose_summary is not None:
+            write_text(out_root / "pose_metrics.csv", _pose_csv(pose_frames, pose_summary))
     except OSError as exc:
         raise UsageExit(f"{out_root}: cannot write metrics ({exc.strerror or exc}); "
                         "use --out DIR") from None
@@ -189,7 +225,22 @@ def evaluate(scene, preds, only_valid, mask_source, protocol, resolution, plot, 
                            for k, v in described["pixel_sets"].items()))
     click.echo(f"# {core.HOLES_NOTE[proto.holes or ev.holes]}")
     click.echo(format_table(means, median=proto.name == "cleargrasp"))
+    if pose_summary is not None:
+        click.echo(format_poses(pose_summary))
     report.finish("frames")
+
+
+def format_poses(summary: dict) -> str:
+    """The pose summary line: objects placed and the median of each pose error."""
+    def cell(key: str, unit: str) -> str:
+        value = summary[f"median_{key}"]
+        return "-" if math.isnan(value) else f"{value:.1f} {unit}"
+
+    return (f"# poses: {summary['matched']} of {summary['objects']} true objects placed; "
+            f"median rotation {cell('rotation_deg', 'deg')} (axis only for surfaces of "
+            f"revolution; axis of every object {cell('axis_deg', 'deg')}), translation "
+            f"{cell('translation_mm', 'mm')}, scale {cell('scale_pct', '%')}, ADD-S "
+            f"{cell('add_s_mm', 'mm')}")
 
 
 def _evaluate_grasps(scene, out, frames, fmt, contacts: str = "grid"):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from sr3d_cli.backends import RECONSTRUCT
 from sr3d_cli.cli.options import (UsageExit, check_masks, common_options, load_config,
                                   masks_option, scene_options)
 from sr3d_cli.cli.stage_loop import batch_options, run_frames
@@ -12,7 +13,7 @@ from sr3d_cli.errors import FrameFailed, InputError
 
 @click.command()
 @click.argument("scene", type=click.Path(exists=True, file_okay=False))
-@click.option("--backend", type=click.Choice(["revolution", "onnx", "library"]), default=None,
+@click.option("--backend", type=click.Choice(RECONSTRUCT.names), default=None,
               help="Reconstruction backend (default: reconstruct.backend).")
 @masks_option
 @click.option("--library", type=click.Path(exists=True, file_okay=False), default=None,

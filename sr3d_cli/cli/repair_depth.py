@@ -52,11 +52,9 @@ def repair_depth(scene, npy, ply, preview, masks, redo, batch, out, frames, fmt)
     if redo == "segment" and cfg.reconstruct.masks != "segment":
         raise UsageExit(f"--redo segment: masks come from {cfg.reconstruct.masks}, not segment")
     pipeline = Pipeline(cfg)
-    try:  # load models once, before the batch, so a bad model file is one usage error
-        if cfg.segment.backend == "sam-onnx":
-            _ = pipeline.segmenter
-        if cfg.reconstruct.backend != "revolution":
-            _ = pipeline.reconstructor
+    try:  # build the backends (models loaded) once, before the batch: a bad model file is
+        # one usage error
+        _ = pipeline.segmenter, pipeline.reconstructor
     except InputError as exc:
         raise UsageExit(str(exc)) from None
 

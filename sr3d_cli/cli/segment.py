@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from sr3d_cli.backends import SEGMENT
 from sr3d_cli.cli.options import UsageExit, common_options, load_config, scene_options
 from sr3d_cli.cli.stage_loop import batch_options, run_frames
 from sr3d_cli.errors import InputError
@@ -11,7 +12,7 @@ from sr3d_cli.errors import InputError
 
 @click.command()
 @click.argument("scene", type=click.Path(exists=True, file_okay=False))
-@click.option("--backend", type=click.Choice(["training-free", "sam-onnx", "import"]),
+@click.option("--backend", type=click.Choice(SEGMENT.names),
               default=None, help="Segmentation backend (default: segment.backend).")
 @click.option("--prompt", default=None, help='Text label stored with every instance ("glass cup").')
 @click.option("--import-dir", "import_dir", type=click.Path(file_okay=False), default=None,

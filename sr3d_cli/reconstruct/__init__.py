@@ -189,20 +189,19 @@ def unseen_mouth(fit: RevolutionFit, cfg: ReconstructConfig) -> trimesh.Trimesh 
 
 
 class Reconstructor:
-    """One per batch: loads models or the library once; :meth:`__call__` per object."""
+    """One per batch: builds the configured backend (:data:`sr3d_cli.backends.RECONSTRUCT`),
+    which loads its models or library once; :meth:`__call__` per object."""
 
     def __init__(self, cfg: ReconstructConfig):
+        from sr3d_cli.backends import RECONSTRUCT
+
         self.cfg = cfg
-        self.model = None
-        self.library = None
-        if cfg.backend == "onnx":
-            from sr3d_cli.reconstruct.onnx_models import load_image_to_shape
+        self.backend = RECONSTRUCT.create(cfg.backend, cfg)
 
-            self.model = load_image_to_shape(cfg)
-        elif cfg.backend == "library":
-            from sr3d_cli.reconstruct.library import MeshLibrary
-
-            self.library = MeshLibrary(cfg.library)
+    @property
+    def needs_plane(self) -> bool:
+        """Whether the backend needs the support plane (all but a single-image model do)."""
+        return self.backend.needs_plane
 
     def __call__(self, rgb: np.ndarray, mask: np.ndarray, K: np.ndarray, plane: Plane | None,
                  label: str = "", depth: np.ndarray | None = None,
@@ -211,24 +210,38 @@ class Reconstructor:
         ``depth (H, W)`` metres, when given, helps decide between standing and lying and, seen
         from above, gives a standing object's height and profile. ``occluders (H, W) bool``:
         pixels of objects in front that may hide this one (the fit ignores them)."""
-        cfg = self.cfg
-        check_mask(mask, cfg)
-        if cfg.backend == "onnx":
-            check_border(mask, cfg, K)
-            mesh = normalise_mesh(self.model(rgb, mask))
-            return Reconstruction(mesh, {"backend": "onnx"})
-        if plane is None:
+        check_mask(mask, self.cfg)
+        if plane is None and self.needs_plane:
             raise ObjectError("no support plane: the revolution fit needs the table")
+        return self.backend(rgb, mask, K, plane, label, depth, occluders)
+
+
+# Backends: built with the reconstruct config; called per object with the arguments of
+# Reconstructor.__call__ (the mask already checked, the plane there where they need it).
+
+class RevolutionBackend:
+    """``revolution``: the training-free surface of revolution fitted to the silhouette and
+    the readings."""
+
+    needs_plane = True
+
+    def __init__(self, cfg: ReconstructConfig):
+        self.cfg = cfg
+
+    def fitted(self, mask, K, plane, depth, occluders) -> tuple[RevolutionFit, dict]:
+        """The revolution fit of the object and the meta data of its mesh."""
+        cfg = self.cfg
         fit = configured_fit(mask, K, plane, cfg, depth, occluders)
         cut = check_border(mask, cfg, K, fit)
         meta = {"backend": cfg.backend, "resting": fit.resting, "silhouette_iou": round(fit.iou, 4),
                 "pose_hint": {"T_cam_obj": fit.T_cam_obj.tolist(), "scale": fit.height}}
         if cut:
             meta["cut_by_border"] = cut  # the top is out of view: its height is a guess
-        if cfg.backend == "library":
-            name, mesh = self.library.pick(label, fit.profile)
-            meta["library_mesh"] = name
-            return Reconstruction(mesh, meta)
+        return fit, meta
+
+    def __call__(self, rgb, mask, K, plane, label, depth, occluders) -> Reconstruction:
+        cfg = self.cfg
+        fit, meta = self.fitted(mask, K, plane, depth, occluders)
         if depth is not None and cfg.use_depth:
             fit = carved(fit, mask, depth, K)
         fit = straight_walls(smoothed(fit, cfg.smooth), cfg.straight_wall)
@@ -238,3 +251,37 @@ class Reconstructor:
             meta["pose_hint"]["T_cam_obj"] = mouth.T_cam_obj.tolist()  # the mouth is the top
             return Reconstruction(revolve(mouth.profile, cfg.sections), meta)
         return Reconstruction(revolve(fit.profile, cfg.sections), meta, unseen_mouth(fit, cfg))
+
+
+class LibraryBackend(RevolutionBackend):
+    """``library``: the library mesh that the label names or that best fits the revolution
+    fit's profile."""
+
+    def __init__(self, cfg: ReconstructConfig):
+        from sr3d_cli.reconstruct.library import MeshLibrary
+
+        super().__init__(cfg)
+        self.library = MeshLibrary(cfg.library)
+
+    def __call__(self, rgb, mask, K, plane, label, depth, occluders) -> Reconstruction:
+        fit, meta = self.fitted(mask, K, plane, depth, occluders)
+        name, mesh = self.library.pick(label, fit.profile)
+        meta["library_mesh"] = name
+        return Reconstruction(mesh, meta)
+
+
+class OnnxBackend:
+    """``onnx``: a single-image reconstruction model the user supplies (no plane needed)."""
+
+    needs_plane = False
+
+    def __init__(self, cfg: ReconstructConfig):
+        from sr3d_cli.reconstruct.onnx_models import load_image_to_shape
+
+        self.cfg = cfg
+        self.model = load_image_to_shape(cfg)
+
+    def __call__(self, rgb, mask, K, plane, label, depth, occluders) -> Reconstruction:
+        check_border(mask, self.cfg, K)
+        mesh = normalise_mesh(self.model(rgb, mask))
+        return Reconstruction(mesh, {"backend": "onnx"})

@@ -126,10 +126,9 @@ def read_prompts(path: Path, frame_id: str, kind: str = "boxes") -> list[list[fl
     return prompts.tolist()
 
 
-def import_masks(folder: Path, frame_id: str, shape: tuple[int, int], label: str,
-                 min_area: int) -> Instances:
+def imported_ids(folder: Path, frame_id: str, shape: tuple[int, int]) -> np.ndarray:
     """Masks made elsewhere: ``folder/<frame_id>.png`` with instance ids, or binary (split into
-    8-connected components)."""
+    8-connected components); ``(H, W)`` int ids, 0 = background."""
     path = None
     for suffix in (".png", ".tif", ".tiff", ".bmp"):
         if (folder / f"{frame_id}{suffix}").is_file():
@@ -141,22 +140,53 @@ def import_masks(folder: Path, frame_id: str, shape: tuple[int, int], label: str
     if ids.shape != shape:
         raise InputError(path, f"mask is {ids.shape[1]}x{ids.shape[0]} but the frame is "
                                f"{shape[1]}x{shape[0]}")
+    return ids
+
+
+def import_masks(folder: Path, frame_id: str, shape: tuple[int, int], label: str,
+                 min_area: int) -> Instances:
+    """The instances of :func:`imported_ids`, each with confidence 1, numbered 1..n."""
+    ids = imported_ids(folder, frame_id, shape)
     values = [int(v) for v in np.unique(ids) if v > 0]
     return from_masks([ids == v for v in values], [1.0] * len(values), shape, label, min_area)
 
 
 class Segmenter:
-    """One per batch: loads models once, then :meth:`__call__` per frame."""
+    """One per batch: builds the configured backend (:data:`sr3d_cli.backends.SEGMENT`), which
+    loads its models once, then :meth:`__call__` per frame."""
+
+    def __init__(self, cfg: SegmentConfig, plane_cfg: PlaneConfig):
+        from sr3d_cli.backends import SEGMENT
+
+        self.cfg, self.plane_cfg = cfg, plane_cfg
+        self.backend = SEGMENT.create(cfg.backend, cfg, plane_cfg)
+
+    def __call__(self, frame_id: str, rgb: np.ndarray, depth_m: np.ndarray,
+                 K: np.ndarray) -> Instances:
+        c = self.cfg
+        shape = depth_m.shape
+        label = c.prompt or "transparent object"
+        masks, scores = self.backend(frame_id, rgb, depth_m, K)
+        kept = [(m, s) for m, s in zip(masks, scores) if s >= c.min_score]
+        out = from_masks([m for m, _ in kept], [s for _, s in kept], shape, label, c.min_area)
+        dropped = len(masks) - len(kept)
+        if dropped:
+            out.notes.append(f"dropped {dropped} instance(s) scored below segment.min_score "
+                             f"{c.min_score:g}")
+        return out
+
+
+# Backends: built with (segment config, plane config); called per frame with (frame id, rgb
+# (H, W, 3) uint8, depth (H, W) metres, K (3, 3)), they return the frame's masks ((H, W) bool
+# each) and their confidences.
+
+class TrainingFree:
+    """``training-free``: where the depth fails and the colour looks like glass, no weights."""
 
     def __init__(self, cfg: SegmentConfig, plane_cfg: PlaneConfig):
         self.cfg, self.plane_cfg = cfg, plane_cfg
-        self.sam = None
-        if cfg.backend == "sam-onnx":
-            from sr3d_cli.segment.sam import SamOnnx
 
-            self.sam = SamOnnx(cfg.sam_encoder, cfg.sam_decoder)
-
-    def default(self, rgb, depth_m, K) -> tuple[list[np.ndarray], list[float]]:
+    def __call__(self, frame_id: str, rgb, depth_m, K) -> tuple[list[np.ndarray], list[float]]:
         from sr3d_cli.segment.training_free import segment_training_free
 
         c = self.cfg
@@ -169,28 +199,33 @@ class Segmenter:
                                       max_object_share=c.max_object_share)
         return [to_full_size(f.mask, shape) for f in found], [f.score for f in found]
 
-    def __call__(self, frame_id: str, rgb: np.ndarray, depth_m: np.ndarray,
-                 K: np.ndarray) -> Instances:
-        c = self.cfg
-        shape = depth_m.shape
-        label = c.prompt or "transparent object"
-        if c.backend == "import":
-            if not c.import_dir:
-                raise InputError("segment.import_dir", "the import backend needs a folder of masks")
-            return import_masks(Path(c.import_dir), frame_id, shape, label, c.min_area)
-        if c.backend == "training-free":
-            masks, scores = self.default(rgb, depth_m, K)
-        else:
-            masks, scores = self.prompted(frame_id, rgb, depth_m, K)
-        kept = [(m, s) for m, s in zip(masks, scores) if s >= c.min_score]
-        out = from_masks([m for m, _ in kept], [s for _, s in kept], shape, label, c.min_area)
-        dropped = len(masks) - len(kept)
-        if dropped:
-            out.notes.append(f"dropped {dropped} instance(s) scored below segment.min_score "
-                             f"{c.min_score:g}")
-        return out
 
-    def prompted(self, frame_id: str, rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray
+class Imported:
+    """``import``: masks made elsewhere (:func:`imported_ids`), each with confidence 1."""
+
+    def __init__(self, cfg: SegmentConfig, plane_cfg: PlaneConfig):
+        self.cfg = cfg
+
+    def __call__(self, frame_id: str, rgb, depth_m, K) -> tuple[list[np.ndarray], list[float]]:
+        if not self.cfg.import_dir:
+            raise InputError("segment.import_dir", "the import backend needs a folder of masks")
+        ids = imported_ids(Path(self.cfg.import_dir), frame_id, depth_m.shape)
+        masks = [ids == v for v in np.unique(ids) if v > 0]
+        return masks, [1.0] * len(masks)
+
+
+class SamPrompted:
+    """``sam-onnx``: SAM through onnxruntime, prompted by the user's points or boxes, else by
+    the boxes of the training-free backend's instances."""
+
+    def __init__(self, cfg: SegmentConfig, plane_cfg: PlaneConfig):
+        from sr3d_cli.segment.sam import SamOnnx
+
+        self.cfg = cfg
+        self.sam = SamOnnx(cfg.sam_encoder, cfg.sam_decoder)
+        self.default = TrainingFree(cfg, plane_cfg)
+
+    def __call__(self, frame_id: str, rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray
                  ) -> tuple[list[np.ndarray], list[float]]:
         """SAM's masks and predicted IoUs, one per prompt: the user's points, else the user's
         boxes, else the boxes of the training-free backend's instances."""
@@ -205,6 +240,6 @@ class Segmenter:
             if c.boxes:
                 boxes = read_prompts(Path(c.boxes), frame_id, "boxes")
             else:
-                boxes = [bbox(m) for m in self.default(rgb, depth_m, K)[0]]
+                boxes = [bbox(m) for m in self.default(frame_id, rgb, depth_m, K)[0]]
             found = [self.sam.segment_box(embedding, scale, np.asarray(b), shape) for b in boxes]
         return [m for m, _ in found], [s for _, s in found]

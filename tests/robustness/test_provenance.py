@@ -69,7 +69,7 @@ def recorded(scene: Path, stage: str) -> dict:
 
 
 @pytest.mark.parametrize("setting, stages", [
-    ("align.refine_evals=40", {"align", "repair"}),
+    ("advanced.align.refine_evals=40", {"align", "repair"}),  # recorded as align.refine_evals
     ("reconstruct.levels=30", {"reconstruct", "align", "repair"}),
     ("repair.outside_render=keep", {"repair"}),
     ("segment.min_area=5000", {"segment", "reconstruct", "align", "repair"}),
@@ -83,7 +83,7 @@ def test_a_changed_key_remakes_exactly_the_stages_that_depend_on_it(repaired, se
     assert "Traceback" not in result.output
     after = stamps(repaired)
     assert remade(before, after) == stages
-    key, value = setting.split("=")
+    key, value = setting.removeprefix("advanced.").split("=")
     first = min(stages, key=list(RECORDS).index)
     assert str(recorded(repaired, first)["config"][key]) == value
     # the same again: nothing is stale, only the repaired depth is rendered again
