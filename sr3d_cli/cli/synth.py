@@ -43,9 +43,9 @@ def synth(out, scenes, views, seed, families, overwrite):
     adds handles, square, flat and open vessels.
 
     \b
-    Examples:
+    Example:
       sr3d synth build/synth --scenes 20 --seed 7
-      sr3d synth build/shapes --scenes 8 --seed 900 --families all
+      sr3d synth build/shapes --scenes 24 --seed 13300 --families all
       sr3d synth build/mugs --families mug,square_bottle
     """
     from sr3d_cli.render import make_renderer
