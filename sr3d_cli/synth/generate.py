@@ -7,6 +7,7 @@ depend on how many others are generated, and output is byte-identical for a seed
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +20,8 @@ from sr3d_cli.io.atomic import write_bytes, write_json, write_png
 from sr3d_cli.io.images import write_depth
 from sr3d_cli.render import RenderMesh, Renderer
 from sr3d_cli.synth import appearance, layout
+from sr3d_cli.synth.families import DEFAULT_FAMILIES, kinds_for
+from sr3d_cli.synth.shapes import KINDS
 from sr3d_cli.synth.sensor import simulate_depth
 
 TABLE_ID = 1000  # render ids: glass 1..n, distractors 1001.., table 1000
@@ -55,20 +58,23 @@ def _world_mesh(obj: layout.Placed, obj_id: int) -> RenderMesh:
     return RenderMesh(obj.world_vertices(), obj.mesh.faces, obj_id, normals)
 
 
-def sample_layout(cfg: SynthConfig, rng: np.random.Generator) -> layout.Layout:
+def sample_layout(cfg: SynthConfig, rng: np.random.Generator,
+                  kinds: tuple[str, ...] = KINDS) -> layout.Layout:
+    """Objects (transparent ones of ``kinds``), the camera and its views of one scene."""
     camera = layout.sample_camera(rng, cfg.resolutions, cfg.depth_scale)
     n_glass = int(rng.integers(cfg.objects[0], cfg.objects[1] + 1))
     n_other = int(rng.integers(cfg.distractors[0], cfg.distractors[1] + 1))
-    glass = [layout.sample_glass(rng, cfg.lying_fraction) for _ in range(n_glass)]
+    glass = [layout.sample_glass(rng, cfg.lying_fraction, kinds) for _ in range(n_glass)]
     others = [layout.sample_distractor(rng) for _ in range(n_other)]
     objects = layout.arrange(glass + others, rng)  # glass first: the first always fits
     glass_pts = np.vstack([o.world_vertices() for o in objects if o.transparent])
     target = (glass_pts.min(0) + glass_pts.max(0)) / 2
     target[2] = 0.3 * glass_pts[:, 2].max()
+    elevation = layout.elevation_range(objects, tuple(cfg.elevation_deg))
     views = []
     for _ in range(cfg.views):
         for _attempt in range(100):
-            T = layout.sample_view(rng, target, tuple(cfg.distance), tuple(cfg.elevation_deg))
+            T = layout.sample_view(rng, target, tuple(cfg.distance), elevation)
             if layout.in_view(glass_pts, T, camera):
                 break
         views.append(T)
@@ -120,10 +126,15 @@ def render_frame(scene: layout.Layout, T_world_cam: np.ndarray, renderer: Render
     return SynthFrame(rgb, raw, gt, mask, objects)
 
 
-def write_scene(out: Path, scene_index: int, cfg: SynthConfig, renderer: Renderer) -> list[str]:
-    """Generate scene ``scene_index`` into folder ``out``; returns the frame ids written."""
+def write_scene(out: Path, scene_index: int, cfg: SynthConfig, renderer: Renderer,
+                families: Sequence[str] = DEFAULT_FAMILIES) -> list[str]:
+    """Generate scene ``scene_index`` into folder ``out``; returns the frame ids written.
+
+    families : the object families (or single kinds, or ``all``) its transparent objects are
+    drawn from (:mod:`sr3d_cli.synth.families`); the default draws what it always drew.
+    """
     rng = np.random.default_rng([cfg.seed, scene_index])
-    scene = sample_layout(cfg, rng)
+    scene = sample_layout(cfg, rng, kinds_for(families))
     texture = appearance.TableTexture(rng, extent=TABLE_HALF)
     camera: Camera = scene.camera
     mesh_names = {}

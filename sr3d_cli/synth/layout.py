@@ -11,7 +11,15 @@ from sr3d_cli.geometry.camera import Camera, project
 from sr3d_cli.geometry.revolution import resting_edge
 from sr3d_cli.geometry.transforms import (apply_T, look_at, make_T, rotation_about,
                                           rotation_between)
-from sr3d_cli.synth.shapes import KINDS, make_glassware
+from sr3d_cli.synth.families import FAMILIES, make_shape
+from sr3d_cli.synth.shapes import KINDS
+
+SIDE_TILT_DEG = 40.0  # a shape laid on its side keeps its axis within this of level (else it
+# stands or stands on its head: not lying)
+SIDE_STEP_DEG = (5.0, 0.5, 0.05)  # side_rotation's grids, each around the last one's best:
+# the finest leaves the resting points within 0.001 of the object's height of the table
+OPEN_MIN_ELEVATION_DEG = 56.0  # the inner floor of an open glass 1.5x as tall as wide shows
+# from atan(1.5) = 56 degrees up: scenes holding one are seen from at least this high
 
 
 @dataclass
@@ -59,16 +67,60 @@ def _rest(mesh: trimesh.Trimesh, R: np.ndarray, scale: float) -> np.ndarray:
     return make_T(R, [0.0, 0.0, -z.min()])
 
 
-def sample_glass(rng: np.random.Generator, lying_fraction: float) -> Placed:
-    kind = KINDS[rng.integers(len(KINDS))]
-    glass = make_glassware(kind, rng)
-    mesh = glass.unit_mesh()
+def side_rotation(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Rotation (object -> world) that lays any closed mesh on its side as it comes to rest:
+    of the orientations with the object's z axis within :data:`SIDE_TILT_DEG` of level, the one
+    with its centre of mass lowest above its lowest point (least potential energy: a flat bottle
+    on its broad face, a mug on its body and handle). Searched on a coarse grid of roll about
+    the axis and tilt of the axis, then finer ones around the best."""
+    hull = mesh.convex_hull.vertices  # (k, 3) the points that can touch a table
+    com = mesh.center_mass
+
+    def search(roll: np.ndarray, tilt: np.ndarray) -> tuple[float, float]:
+        r, t = (a.ravel() for a in np.meshgrid(roll, tilt))
+        rot = np.stack([rotation_about([1.0, 0, 0], np.pi / 2 + b) @ rotation_about([0, 0, 1.0], a)
+                        for a, b in zip(r, t)])  # (g, 3, 3)
+        height = rot[:, 2] @ com - (hull @ rot[:, 2].T).min(0)
+        best = int(np.argmin(height))
+        return r[best], t[best]
+
+    steps = np.radians(SIDE_STEP_DEG)
+    limit = np.radians(SIDE_TILT_DEG)
+    roll, tilt = search(np.arange(0, 2 * np.pi, steps[0]),
+                        np.arange(-limit, limit + 1e-9, steps[0]))
+    for coarse, fine in zip(steps[:-1], steps[1:]):
+        around = np.arange(-coarse, coarse + 1e-9, fine)
+        roll, tilt = search(roll + around, np.clip(tilt + around, -limit, limit))
+    return rotation_about([1.0, 0, 0], np.pi / 2 + tilt) @ rotation_about([0, 0, 1.0], roll)
+
+
+def sample_glass(rng: np.random.Generator, lying_fraction: float,
+                 kinds: tuple[str, ...] = KINDS) -> Placed:
+    """A transparent object of one of ``kinds`` (equally likely), at a random yaw, lying on its
+    side with probability ``lying_fraction`` where its kind can lie."""
+    kind = kinds[rng.integers(len(kinds))]
+    shape = make_shape(kind, rng)
+    mesh = shape.mesh
     yaw = rotation_about([0, 0, 1], rng.uniform(0, 2 * np.pi))
-    lying = kind != "flask" and rng.uniform() < lying_fraction
-    R = yaw @ lying_rotation(glass.profile / glass.height, mesh.center_mass[2]) if lying \
-        else yaw
-    T = _rest(mesh, R, glass.height)
-    return Placed(mesh, T, glass.height, kind, True, "lying" if lying else "standing")
+    lying = shape.can_lie and rng.uniform() < lying_fraction
+    if not lying:
+        R = yaw
+    elif shape.profile is not None:
+        R = yaw @ lying_rotation(shape.profile, mesh.center_mass[2])
+    else:
+        R = yaw @ side_rotation(mesh)
+    T = _rest(mesh, R, shape.height)
+    return Placed(mesh, T, shape.height, kind, True, "lying" if lying else "standing")
+
+
+def elevation_range(objects: list[Placed], elevation_deg: tuple[float, float]
+                    ) -> tuple[float, float]:
+    """Camera elevations (degrees) for a scene: ``elevation_deg``, raised to at least
+    :data:`OPEN_MIN_ELEVATION_DEG` where the scene holds an open vessel to be seen into."""
+    if any(o.transparent and o.label in FAMILIES["open"] for o in objects):
+        return (max(elevation_deg[0], OPEN_MIN_ELEVATION_DEG),
+                max(elevation_deg[1], OPEN_MIN_ELEVATION_DEG))
+    return elevation_deg
 
 
 def sample_distractor(rng: np.random.Generator) -> Placed:
