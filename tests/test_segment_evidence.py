@@ -152,6 +152,21 @@ def test_a_glass_read_smoothly_as_a_real_camera_does_is_found_whole(monkeypatch)
     assert _segment(rgb, depth).objects == []
 
 
+def test_an_instance_beyond_the_table_keeps_only_the_columns_above_its_base():
+    """A glass standing at the table's far edge rises above it in the image; the room's missing
+    readings joined to it beyond the edge, to one side, are not the glass."""
+    footprint = np.zeros((100, 100), bool)
+    footprint[40:] = True  # the table fills the image below row 40
+    glass = np.zeros_like(footprint)
+    glass[20:80, 30:50] = True  # standing at the far edge, rising 20 rows above it
+    room = np.zeros_like(footprint)
+    room[5:40, 30:90] = True  # beyond the edge, joined to the glass's top
+    kept = tf.within_table_columns(glass | room, footprint)
+    assert (kept == (glass | (room & (np.arange(100) < 50 + tf.BEYOND_MARGIN)[None, :]
+                               & (np.arange(100) >= 30 - tf.BEYOND_MARGIN)[None, :]))).all()
+    assert (tf.within_table_columns(glass, footprint) == glass).all()
+
+
 def test_colour_departure_is_low_through_glass_and_high_on_an_opaque_colour():
     rgb, depth, plane = _table_frame((110, 80, 60))
     on_table = tf.on_table_readings(depth, K_TABLE, plane)[1]
@@ -254,7 +269,7 @@ def test_instances_preview_labels_each_instance_with_its_score():
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.46, 8 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
+    per true object mean 0.47, 8 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
     < 0.2 with every object) 0.64 per frame; without the standing bodies (BODY_SEES_TABLE
     out of reach) 0.23, none and 0.91."""
     from sr3d_cli.config import IOConfig
@@ -274,4 +289,4 @@ def test_measured_on_the_shared_real_frames(realdata):
             frames += 1
     assert frames == 11 and len(best) == 16
     assert false / frames <= 0.8
-    assert np.mean(best) >= 0.43 and sum(v >= 0.5 for v in best) >= 7
+    assert np.mean(best) >= 0.44 and sum(v >= 0.5 for v in best) >= 7

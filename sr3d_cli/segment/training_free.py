@@ -84,6 +84,8 @@ BODY_INSIDE = 0.8  # share of a body inside one instance that makes it a part of
 BODY_SHARED = 0.1  # share of a body each of two instances holding it makes it touching objects
 SEE_THROUGH_WINDOW = 91  # pixels: the table's colour around a body is taken beyond its width
 TABLE_LIKE = 1.5  # colour departure under which a pixel shows the table's colour
+BEYOND_MARGIN = 3  # pixels: an object's part beyond the table's far edge stays within this of
+# the columns its part over the table spans (within_table_columns)
 
 
 @dataclass
@@ -534,7 +536,29 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
         return len(split_touching(mask, K, plane, depth=depth_m, glass=glass,
                                   close_radius=close_radius, min_area=min_area)) == 1
 
-    return _without_overlaps(with_bodies(out, bodies, glass | ev.above, one_object))
+    joined = with_bodies(out, bodies, glass | ev.above, one_object)
+    return _without_overlaps([Candidate(within_table_columns(c.mask, footprint), c.score)
+                              for c in joined])
+
+
+def within_table_columns(mask: np.ndarray, footprint: np.ndarray,
+                         margin: int = BEYOND_MARGIN) -> np.ndarray:
+    """An instance ``(H, W) bool`` without what lies beyond the table's footprint ``(H, W)
+    bool`` outside the columns its part over the table spans (widened by ``margin`` pixels).
+
+    An object standing on the table may rise above the table's far edge in the image, but only
+    straight above its own base: the rest beyond the table is the room (a wall's or the floor's
+    missing readings joined to the object's)."""
+    inside = mask & footprint
+    if not inside.any() or inside.sum() == mask.sum():
+        return mask
+    columns = inside.any(axis=0)
+    columns = cv2.dilate(columns.astype(np.uint8)[None, :], np.ones((1, 2 * margin + 1), np.uint8)
+                         )[0] > 0
+    kept = mask & (footprint | columns[None, :])
+    count, labels = cv2.connectedComponents(kept.astype(np.uint8), connectivity=8)
+    keep = np.unique(labels[inside & kept])
+    return np.isin(labels, keep[keep > 0])
 
 
 def _without_overlaps(found: list[Candidate]) -> list[Candidate]:
