@@ -18,6 +18,8 @@ from sr3d_cli.geometry.camera import project
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.geometry.transforms import apply_T, place_points
+from sr3d_cli.reconstruct.bowls import bowl_instead
+from sr3d_cli.reconstruct.handles import handle_slab, split_handle
 from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, RevolutionFit, carved,
                                                  fit_revolution, off_table_readings, raw_support,
                                                  smoothed, straight_walls)
@@ -241,16 +243,39 @@ class RevolutionBackend:
 
     def __call__(self, rgb, mask, K, plane, label, depth, occluders) -> Reconstruction:
         cfg = self.cfg
-        fit, meta = self.fitted(mask, K, plane, depth, occluders)
+        body, handle = split_handle(mask, K, plane)  # the body is fitted without its handle
+        fit, meta = self.fitted(body, K, plane, depth, occluders)
         if depth is not None and cfg.use_depth:
-            fit = carved(fit, mask, depth, K)
+            bowl = bowl_instead(fit, body, K, plane, depth, cfg.iterations,
+                                lambda f: mouths(f, cfg))
+            if bowl is not None:
+                fit = bowl
+                meta["pose_hint"]["scale"] = bowl.height
+                meta["silhouette_iou"] = round(bowl.iou, 4)
+            fit = carved(fit, body, depth, K)
         fit = straight_walls(smoothed(fit, cfg.smooth), cfg.straight_wall)
-        mouth = open_mouth(fit, cfg, mask, K, plane, depth)
+        mouth = open_mouth(fit, cfg, body, K, plane, depth)
         if mouth is not None:
             meta["open_top"] = True
             meta["pose_hint"]["T_cam_obj"] = mouth.T_cam_obj.tolist()  # the mouth is the top
-            return Reconstruction(revolve(mouth.profile, cfg.sections), meta)
-        return Reconstruction(revolve(fit.profile, cfg.sections), meta, unseen_mouth(fit, cfg))
+            built = Reconstruction(revolve(mouth.profile, cfg.sections), meta)
+        else:
+            built = Reconstruction(revolve(fit.profile, cfg.sections), meta,
+                                   unseen_mouth(fit, cfg))
+        return with_handle(built, handle, K)
+
+
+def with_handle(built: Reconstruction, handle: np.ndarray, K: np.ndarray) -> Reconstruction:
+    """``built`` with a slab over the ``handle (H, W) bool`` pixels split off its mask
+    (:func:`sr3d_cli.reconstruct.handles.handle_slab`) unioned to its mesh as a closed
+    component of its own; ``built`` as it is when there is none."""
+    hint = built.meta["pose_hint"]
+    slab = handle_slab(handle, np.asarray(hint["T_cam_obj"]), float(hint["scale"]), K)
+    if slab is None:
+        return built
+    built.meta["handle_pixels"] = int(handle.sum())
+    mesh = trimesh.util.concatenate([built.mesh, slab])
+    return replace(built, mesh=mesh)
 
 
 class LibraryBackend(RevolutionBackend):

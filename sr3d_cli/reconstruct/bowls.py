@@ -1,0 +1,54 @@
+"""Bowls told from domes by the readings.
+
+Seen from above, a bowl (narrow foot, wide open rim) and a dome (wide base, narrowing upwards)
+draw nearly the same outline: the rim's ellipse and the front of the body below it. The
+outline fit settles on the dome (a glass bowl 61 mm tall came out a 42 mm dome, its base as
+wide as the true rim), closed, and the depth it renders lies over the bowl's inside. The
+readings tell them apart: looked into, a bowl returns its floor and inner wall, far below a
+dome's surface. A standing fit that narrows upwards is refitted from its profile turned upside
+down, opened at its top (:func:`sr3d_cli.reconstruct.mouths`); that bowl is kept when
+:data:`BOWL_VOTE` times as many readings lie on it as on the dome and its outline is about as
+good.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, RevolutionFit,
+                                                 _fit, _Model, _result,
+                                                 off_table_readings, raw_support)
+
+NARROW_TOP = 0.7  # a fit whose top radius is below this share of its widest narrows upwards
+BOWL_VOTE = 2.0  # times as many readings on the opened bowl as on the dome to take it
+BOWL_IOU_GAP = 0.03  # the bowl's outline IoU may fall this much short of the dome's
+
+
+def bowl_instead(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, plane: Plane,
+                 depth: np.ndarray, iterations: int,
+                 openings: Callable[[RevolutionFit], list[RevolutionFit]]
+                 ) -> RevolutionFit | None:
+    """The bowl (closed, as fitted; ``openings`` opens it) that explains ``mask (H, W) bool``
+    and the raw ``depth (H, W)`` metres better than the standing dome ``fit``; None when
+    the fit does not narrow upwards or the readings do not prefer the bowl."""
+    if fit.resting != "standing":
+        return None
+    r = fit.profile[1:-1, 0]
+    if r[-1] >= NARROW_TOP * r.max() or np.argmax(r) > len(r) // 2:
+        return None
+    start = _Model(fit.base.copy(), fit.axis.copy(), fit.height, r[::-1] * fit.height)
+    model, iou = _fit(start, mask, K, plane, "standing", iterations)
+    bowl = _result(model, "standing", iou)
+    opened = openings(bowl)
+    if not opened or iou < fit.iou - BOWL_IOU_GAP:
+        return None
+    xs, ys, raw = off_table_readings(mask, depth, K, plane)
+    dome = raw_support(fit, xs, ys, raw, K, mask.shape, DEPTH_BAND)
+    found = raw_support(opened[0], xs, ys, raw, K, mask.shape, DEPTH_BAND)
+    if found >= max(DEPTH_MIN_POINTS, BOWL_VOTE * dome):
+        return bowl
+    return None
+

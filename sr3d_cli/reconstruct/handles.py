@@ -1,0 +1,125 @@
+"""Handles: thin parts of an outline that stick out to one side of a body (a mug's or a
+pitcher's handle), split off before the body is fitted and modelled as a slab of their own.
+
+A handle on one side of a surface of revolution widens the width the fit reads on every row it
+spans, and the fitted body comes out too wide and too near the camera (a cup's 3 cm handle made
+its body 1 cm too wide and put its front surface 2 cm too near). The handle is found in the
+image: an opening of the mask with a disc a quarter of the body's width removes what is thinner
+than that (a handle's tube, not a bottle's neck), and a removed part is a handle when it is
+large, lies outside the convex hull of what the opening kept and to one side of the body's
+upright centre line (a goblet's stem and a flask's neck straddle it).
+
+Its depth is modelled by a slab over the handle's own pixels, in the plane through the body's
+axis that faces the camera (a handle seen beside its body stands out sideways, at about the
+axis's distance), as thick as the handle's pixels are wide: a closed mesh unioned with the body
+as a separate component.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import trimesh
+from skimage.measure import marching_cubes
+
+from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.transforms import apply_T
+
+OPEN_SHARE = 0.5  # opening disc diameter, as a share of the mask's widest inscribed radius
+MIN_SHARE = 0.02  # smallest handle, as a share of the mask's pixels
+MAX_SHARE = 0.35  # largest handle, as a share of the mask's pixels (more is no handle)
+OUTSIDE_SHARE = 0.6  # least share of a handle's pixels outside the body's convex hull
+ONE_SIDE = 0.9  # least share of a handle's pixels on one side of the body's centre line
+SLAB_STEP = 2  # pixels per cell of the grid the slab is built on
+HEIGHT_SLACK = 0.05  # share of the body's height a slab may reach beyond either end of it
+
+
+def split_handle(mask: np.ndarray, K: np.ndarray, plane: Plane
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``(body, handle)`` (H, W) bool, splitting ``mask (H, W) bool`` (see the module's
+    docstring); ``handle`` is empty when nothing in the outline is a handle."""
+    none = np.zeros_like(mask, dtype=bool)
+    m8 = mask.astype(np.uint8)
+    inscribed = float(cv2.distanceTransform(np.pad(m8, 1), cv2.DIST_L2, 5).max())
+    d = int(round(OPEN_SHARE * inscribed))
+    if d < 3:
+        return mask, none
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (d | 1, d | 1))
+    kept = cv2.morphologyEx(m8, cv2.MORPH_OPEN, disc) > 0
+    if not kept.any():
+        return mask, none
+    ys, xs = np.nonzero(kept)
+    hull = np.zeros_like(m8)
+    cv2.fillConvexPoly(hull, cv2.convexHull(np.column_stack([xs, ys]).astype(np.int32)), 1)
+    centre = np.array([xs.mean(), ys.mean()])
+    down = plane.down_at(centre, K)
+    across = np.array([-down[1], down[0]])
+    half_width = 0.5 * kept.sum() / max(np.ptp(np.column_stack([xs, ys]) @ down), 1.0)
+    count, labels = cv2.connectedComponents((mask & ~kept).astype(np.uint8), connectivity=8)
+    area = int(mask.sum())
+    handle = none.copy()
+    for k in range(1, count):
+        part = labels == k
+        size = int(part.sum())
+        if size < MIN_SHARE * area:
+            continue
+        py, px = np.nonzero(part)
+        side = (np.column_stack([px, py]) - centre) @ across
+        outside = 1.0 - hull[py, px].mean()
+        one_side = max((side > 0).mean(), (side < 0).mean())
+        if outside >= OUTSIDE_SHARE and one_side >= ONE_SIDE and \
+                np.abs(side).mean() > half_width:
+            handle |= part
+    if handle.sum() > MAX_SHARE * area:
+        return mask, none
+    return mask & ~handle, handle
+
+
+def handle_slab(handle: np.ndarray, T_cam_obj: np.ndarray, scale: float, K: np.ndarray
+                ) -> trimesh.Trimesh | None:
+    """A closed slab over the ``handle (H, W) bool`` pixels, in the object frame of a body
+    placed at ``T_cam_obj`` (4, 4) with ``scale`` (metres per object unit): centred on the
+    plane through the body's axis that faces the camera, as thick as the handle is wide in
+    the image. None when the handle is empty or that plane is seen edge-on."""
+    if not handle.any():
+        return None
+    base, axis = T_cam_obj[:3, 3], T_cam_obj[:3, 2]
+    mid = base + 0.5 * scale * axis
+    facing = -mid - (-mid @ axis) * axis  # towards the camera, across the axis
+    if np.linalg.norm(facing) < 1e-9:
+        return None
+    facing /= np.linalg.norm(facing)
+    ys, xs = np.nonzero(handle)
+    x0, y0 = xs.min(), ys.min()
+    cells = cv2.resize(handle[y0:ys.max() + 1, x0:xs.max() + 1].astype(np.float32), None,
+                       fx=1 / SLAB_STEP, fy=1 / SLAB_STEP, interpolation=cv2.INTER_AREA) > 0.5
+    if not cells.any():
+        return None
+    volume = np.zeros((cells.shape[0] + 2, cells.shape[1] + 2, 4), np.float32)
+    volume[1:-1, 1:-1, 1:3] = cells[:, :, None]
+    verts, faces, _, _ = marching_cubes(volume, 0.5)
+    u = x0 + (verts[:, 1] - 1 + 0.5) * SLAB_STEP - 0.5
+    v = y0 + (verts[:, 0] - 1 + 0.5) * SLAB_STEP - 0.5
+    rays = np.column_stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones(len(u))])
+    denom = rays @ facing
+    if (np.abs(denom) < 1e-6).any():
+        return None
+    on_plane = rays * ((mid @ facing) / denom)[:, None]
+    z = on_plane[:, 2]
+    width_px = 2.0 * float(cv2.distanceTransform(np.pad(handle, 1).astype(np.uint8),
+                                                 cv2.DIST_L2, 5).max())
+    thick = width_px * float(np.median(z)) / K[0, 0]
+    unit = rays / np.linalg.norm(rays, axis=1, keepdims=True)
+    # the volume's surface runs through layers 0.5 to 2.5: half the thickness either side
+    pts = on_plane + ((verts[:, 2] - 1.5) * 0.5 * thick)[:, None] * unit
+    if not (pts[:, 2] > 0).all():
+        return None
+    obj = apply_T(np.linalg.inv(T_cam_obj), pts) / scale
+    if obj[:, 2].min() < -HEIGHT_SLACK or obj[:, 2].max() > 1 + HEIGHT_SLACK:
+        return None
+    mesh = trimesh.Trimesh(obj, faces, process=True)
+    if not mesh.is_watertight:
+        return None
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
