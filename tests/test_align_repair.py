@@ -223,3 +223,27 @@ def test_a_glass_partly_hidden_by_one_in_front_keeps_its_place_when_its_occluder
     placed = aligner(rec.mesh, back, K, plane, sparse, hint=hint, occluders=front)
     assert np.linalg.norm(placed.t - true_base) < 0.01
     assert placed.scale == pytest.approx(0.1, rel=0.1)
+
+
+WRONG_RADIUS = 1.15  # the model's radius 15% off the true one: a shape scale cannot fix
+
+
+def test_align_keeps_to_its_render_budget_and_never_ends_above_its_start_on_a_wrong_model():
+    """A bottle 15% too wide for its mask, seeded at the true pose and searched: the kept
+    refinement ends at an error no higher than its start's, and the whole placement draws no
+    more silhouettes than its stated bound (also with a small budget)."""
+    plane, T, scale, mask, raw, _ = _scene(12)
+    wrong = BOTTLE.copy()
+    wrong.vertices[:, :2] *= WRONG_RADIUS
+    cfg = AlignConfig(refine_hint=True, hint_accept=1.0)  # the true pose refined, then a search
+    aligner = Aligner(cfg)
+    placed = aligner(wrong, mask, K, plane, raw, hint=(T, scale))
+    d = placed.diagnostics
+    assert 0 < d["renders"] <= aligner.render_bound(wrong) <= aligner.render_bound()
+    assert d["refine_renders"] <= cfg.refine_evals
+    assert d["refine_error"] <= d["refine_error_start"]
+    assert d["refine_error"] < 0.2  # the best a 15%-wide bottle can do is still close
+    small = Aligner(AlignConfig(refine_evals=10, top_candidates=1, yaw_steps=6))
+    d = small(wrong, mask, K, plane, raw).diagnostics
+    assert d["renders"] <= small.render_bound(wrong)
+    assert d["refine_renders"] <= 10 and d["refine_error"] <= d["refine_error_start"]

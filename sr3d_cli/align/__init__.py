@@ -21,7 +21,8 @@ from scipy.optimize import minimize
 from sr3d_cli.align.silhouette import (fill_silhouette, project_mesh, silhouette_iou,
                                        surface_depth)
 from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candidates_sphere,
-                                          is_axisymmetric)
+                                          icosphere_directions, is_axisymmetric,
+                                          resting_directions)
 from sr3d_cli.config import AlignConfig
 from sr3d_cli.geometry.camera import unproject
 from sr3d_cli.geometry.plane import Plane
@@ -215,6 +216,12 @@ class Aligner:
 
     # ---- refinement -----------------------------------------------------------------------------
     def _refine(self, R, t, scale, plane, window, yaw_free):
+        """Silhouette refinement on the plane (Nelder-Mead over shift, log-scale and, with
+        ``yaw_free``, yaw). Bounded: at most ``refine_evals`` silhouette renders (a pose met
+        again is not redrawn). Monotone: the pose returned is the lowest-error one evaluated, the
+        start among them, so the error (1 - soft silhouette IoU) never ends above the start's.
+        Returns (R, t, scale, silhouette (h, w) bool in ``window`` of that pose, info: the
+        start's and the end's error and the renders drawn)."""
         n = plane.normal
         e1 = _unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < 0.9 else np.cross(n, [0, 1.0, 0]))
         e2 = np.cross(n, e1)
@@ -234,23 +241,49 @@ class Aligner:
             t1 = t1 - (n @ t1 + s1 * low + plane.offset) * n  # rest on the plane
             return R1, t1, s1
 
+        errors: dict[bytes, float] = {}  # by pose parameters: a vertex met again is not redrawn
+        best = {"error": np.inf}
+
         def cost(x):
-            R1, t1, s1 = pose(x)
-            ren = _soft(self._silhouette(R1, t1, s1, window)) * shown
-            inter = np.minimum(obs, ren).sum()
-            return 1.0 - inter / max(np.maximum(obs, ren).sum(), 1e-9)
+            key = np.asarray(x, dtype=np.float64).tobytes()
+            if key not in errors:
+                R1, t1, s1 = pose(x)
+                sil = self._silhouette(R1, t1, s1, window)
+                ren = _soft(sil) * shown
+                inter = np.minimum(obs, ren).sum()
+                errors[key] = 1.0 - inter / max(np.maximum(obs, ren).sum(), 1e-9)
+                if errors[key] < best["error"]:
+                    best.update(error=errors[key], x=np.array(x, dtype=np.float64), sil=sil)
+            return errors[key]
 
         x = np.zeros(4 if yaw_free else 3)
+        start = cost(x)
         step = np.array([0.004, 0.004, 0.05, np.radians(5)])[:len(x)]
         for _ in range(2):  # a restart with a fresh simplex escapes early collapse
             simplex = np.vstack([x] + [x + np.eye(len(x))[i] * step[i] for i in range(len(x))])
-            res = minimize(cost, x, method="Nelder-Mead",
-                           options={"initial_simplex": simplex,
-                                    "maxfev": self.cfg.refine_evals // 2,
-                                    "xatol": 1e-4, "fatol": 1e-5})
-            x = res.x
+            # scipy stops a run at maxfev calls of cost, memoised ones included
+            minimize(cost, x, method="Nelder-Mead",
+                     options={"initial_simplex": simplex, "maxfev": self.cfg.refine_evals // 2,
+                              "xatol": 1e-4, "fatol": 1e-5})
+            x = best["x"]
             step = step / 3
-        return pose(x)
+        R1, t1, s1 = pose(best["x"])
+        return R1, t1, s1, best["sil"], {"refine_error_start": round(float(start), 5),
+                                         "refine_error": round(float(best["error"]), 5),
+                                         "refine_renders": len(errors)}
+
+    def render_bound(self, mesh: trimesh.Trimesh | None = None) -> int:
+        """The most silhouette renders one placement draws (its bounded cost): every candidate
+        orientation once, the reconstruction's pose once, and each seed carried on (the best
+        ``top_candidates`` and the hint) its refinement's ``refine_evals`` plus one IoU check.
+        Without ``mesh`` the count of resting orientations is its largest, ``max_rests``."""
+        cfg = self.cfg
+        if cfg.mode == "paper":
+            return len(icosphere_directions(cfg.views)) * cfg.rolls + 1
+        rests = cfg.max_rests if mesh is None else \
+            len(resting_directions(mesh, is_axisymmetric(mesh), cfg.max_rests))
+        refined = cfg.refine_evals if cfg.refine else 0
+        return rests * cfg.yaw_steps + 1 + (cfg.top_candidates + 1) * (refined + 1)
 
     # ---- raw depth on the object ----------------------------------------------------------------
     def _depth_correction(self, R, t, scale, mask, depth_m, plane) -> tuple[float, dict]:
@@ -348,6 +381,7 @@ class Aligner:
         plain = cfg.mode == "paper"
         searched = {"candidates": 0}
         extent_px = float(max(np.ptp(xs), np.ptp(ys)) + 1)
+        renders = [0]  # silhouettes drawn for this placement (see render_bound)
 
         def searched_candidates():
             """View matching over the candidate orientations: the best view of each resting
@@ -358,6 +392,7 @@ class Aligner:
                 rotations = candidates_plane(mesh, plane.normal, symmetric, cfg.yaw_steps,
                                              cfg.max_rests)
             searched["candidates"] = len(rotations)
+            renders[0] += len(rotations)
             scored = []
             for i, (group, R) in enumerate(rotations):
                 s0 = self._size_guess(R, anchor, plane, extent_px)
@@ -380,26 +415,32 @@ class Aligner:
             if hint is None or plain:
                 return []
             T_h, s_h = np.asarray(hint[0], dtype=np.float64), float(hint[1])
+            renders[0] += 1
             view, _ = matcher.render_and_score(self.verts, self.faces, T_h[:3, :3], T_h[:3, 3],
                                                s_h, K, window.spec)
             prior = cfg.upright_prior * max(0.0, float(T_h[:3, 2] @ plane.normal))
             return [(view.total, prior, "hint", -1, T_h[:3, :3], s_h, T_h[:3, 3], view)]
 
         def refine(R, t, scale):
+            """(R, t, scale, its silhouette in ``window`` or None, refinement info)."""
             if not cfg.refine:
-                return R, t, scale
-            return self._refine(R, t, scale, plane, window,
-                                yaw_free=not (symmetric and self._upright(R, plane)))
+                return R, t, scale, None, {}
+            R, t, scale, sil, info = self._refine(
+                R, t, scale, plane, window, yaw_free=not (symmetric and self._upright(R, plane)))
+            renders[0] += info["refine_renders"]
+            return R, t, scale, sil, info
 
         best = None
         for batch in (hinted, searched_candidates):
             if best is not None and best[1] >= cfg.hint_accept:
                 break  # the reconstruction's own pose explains the mask: no search needed
             for _total, prior, group, i, R, s0, t0, view in batch():
+                sil = None
                 if group == "hint":
                     diag = {"seed": "reconstruction pose"}
                     if cfg.refine_hint:
-                        R, t, scale = refine(R, t0, s0)
+                        R, t, scale, sil, info = refine(R, t0, s0)
+                        diag.update(info)
                     else:
                         t, scale = t0, s0
                 elif plain:
@@ -409,9 +450,12 @@ class Aligner:
                         scale, t, diag = self._keypoints_sr3d(R, s0, t0, plane, down)
                     except AlignError:
                         continue
-                    R, t, scale = refine(R, t, scale)
-                iou = silhouette_iou(self._silhouette(R, t, scale, window), window.obs,
-                                     window.occluders)
+                    R, t, scale, sil, info = refine(R, t, scale)
+                    diag = {**diag, **info}
+                if sil is None:
+                    sil = self._silhouette(R, t, scale, window)
+                    renders[0] += 1
+                iou = silhouette_iou(sil, window.obs, window.occluders)
                 if best is None or iou + prior > best[0]:
                     best = (iou + prior, iou, i, R, t, scale, view, diag)
         if best is None:
@@ -426,7 +470,7 @@ class Aligner:
                   "silhouette_iou": round(iou, 4)}
         diagnostics = {"mode": cfg.mode, "best_view": int(i),
                        "candidates": searched["candidates"], "axisymmetric": bool(symmetric),
-                       **diag}
+                       "renders": renders[0], **diag}
         return Placement(R, np.asarray(t, dtype=np.float64), float(scale), scores, diagnostics)
 
     @staticmethod

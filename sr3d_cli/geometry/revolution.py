@@ -127,11 +127,11 @@ def silhouette(centres: np.ndarray, axis: np.ndarray, radii: np.ndarray, K: np.n
                    pts[..., 1] / np.maximum(z, 1e-6) * K[1, 1] + K[1, 2] - origin[1]], -1)
     out = np.zeros(shape, np.uint8)
     scale = 4  # sub-pixel precision for cv2 (fixed point, 2 bits)
-    for k in range(len(centres) - 1):
-        if (z[k] <= 0.01).any() or (z[k + 1] <= 0.01).any():
-            continue
-        hull = cv2.convexHull(np.rint(np.vstack([uv[k], uv[k + 1]]) * scale).astype(np.int32))
-        cv2.fillConvexPoly(out, hull, 1, lineType=cv2.LINE_8, shift=2)
+    fixed = np.rint(uv * scale).astype(np.int32)  # (L, T, 2)
+    pairs = np.concatenate([fixed[:-1], fixed[1:]], axis=1)  # (L-1, 2T, 2): a frustum's rings
+    in_front = (z > 0.01).all(axis=1)
+    for k in np.flatnonzero(in_front[:-1] & in_front[1:]):
+        cv2.fillConvexPoly(out, cv2.convexHull(pairs[k]), 1, cv2.LINE_8, 2)
     return out > 0
 
 

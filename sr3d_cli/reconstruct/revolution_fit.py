@@ -96,9 +96,12 @@ class _Frame:
 
     def __init__(self, mask: np.ndarray, centre_px: np.ndarray, up_px: np.ndarray, pad: int,
                  occluders: np.ndarray | None = None):
-        ys, xs = np.nonzero(mask if occluders is None else mask | occluders)
-        self.x0, self.y0 = max(0, xs.min() - pad), max(0, ys.min() - pad)
-        x1, y1 = min(mask.shape[1], xs.max() + pad + 1), min(mask.shape[0], ys.max() + pad + 1)
+        # the box of the set pixels: cv2 scans a uint8 view of the bool image without
+        # listing every pixel (np.nonzero on a full frame costs about 20 times more)
+        bx, by, bw, bh = cv2.boundingRect((mask if occluders is None else mask | occluders)
+                                          .view(np.uint8))
+        self.x0, self.y0 = max(0, bx - pad), max(0, by - pad)
+        x1, y1 = min(mask.shape[1], bx + bw + pad), min(mask.shape[0], by + bh + pad)
         self.shape = (y1 - self.y0, x1 - self.x0)
         angle = np.degrees(np.arctan2(up_px[0], -up_px[1]))  # rotate 'up' onto image -y
         c = (float(centre_px[0] - self.x0), float(centre_px[1] - self.y0))
