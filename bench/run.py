@@ -562,7 +562,8 @@ def mesh_bench(synth: Path) -> dict:
     from sr3d_cli.evaluate import chamfer_distance, instance_ious
     from sr3d_cli.geometry.revolution import profile_from_mesh, revolve
     from sr3d_cli.reconstruct import ObjectError, check_border, check_mask, configured_fit
-    from sr3d_cli.segment import Segmenter, support_plane
+    from sr3d_cli.geometry.plane import support_plane
+    from sr3d_cli.segment import Segmenter
 
     segmenter = Segmenter(SegmentConfig(), PlaneConfig())
     result: dict = {}

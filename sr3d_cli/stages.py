@@ -16,7 +16,7 @@ import trimesh
 
 from sr3d_cli.errors import InputError
 from sr3d_cli.geometry.occlusion import occluders, opaque_objects
-from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.plane import Plane, support_plane
 from sr3d_cli.geometry.transforms import place_points
 from sr3d_cli.io import provenance
 from sr3d_cli.io.atomic import write_bytes, write_json, write_npy, write_png
@@ -107,8 +107,6 @@ def load_instances(source: SceneSource, frame_id: str, shape: tuple[int, int],
 
 def frame_plane(frame: Frame, ids: np.ndarray, plane_cfg) -> tuple[Plane | None, str | None]:
     """The support plane with the objects left out, or (None, reason)."""
-    from sr3d_cli.segment import support_plane
-
     try:
         return support_plane(frame.depth_m, frame.camera.K, plane_cfg, exclude=ids > 0), None
     except ValueError as exc:
@@ -456,7 +454,6 @@ def grasp_truth(source: SceneSource, frame_id: str, plane_cfg):
 
     from sr3d_cli.geometry.camera import depth_to_points
     from sr3d_cli.grasp.quality import TrueScene
-    from sr3d_cli.segment import support_plane
 
     gt = source.load_gt_objects(frame_id)
     if not gt or not gt.get("objects"):

@@ -18,14 +18,13 @@ import numpy as np
 import trimesh
 from scipy.optimize import minimize
 
-from sr3d_cli.align.silhouette import (fill_silhouette, project_mesh, silhouette_iou,
-                                       surface_depth)
 from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candidates_sphere,
                                           is_axisymmetric)
 from sr3d_cli.config import AlignConfig
 from sr3d_cli.geometry.camera import unproject
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.transforms import make_T, rotation_about
+from sr3d_cli.geometry.silhouette import fill_silhouette, mask_iou, project_mesh, surface_depth
+from sr3d_cli.geometry.transforms import make_T, rotation_about, unit
 
 
 class AlignError(ValueError):
@@ -43,10 +42,6 @@ class Placement:
     @property
     def T_cam_obj(self) -> np.ndarray:
         return make_T(self.R, self.t)
-
-
-def _unit(v):
-    return v / np.linalg.norm(v)
 
 
 def _ray(uv, K):
@@ -216,7 +211,7 @@ class Aligner:
     # ---- refinement -----------------------------------------------------------------------------
     def _refine(self, R, t, scale, plane, window, yaw_free):
         n = plane.normal
-        e1 = _unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < 0.9 else np.cross(n, [0, 1.0, 0]))
+        e1 = unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < 0.9 else np.cross(n, [0, 1.0, 0]))
         e2 = np.cross(n, e1)
         obs = _soft(window.obs)
         shown = 1.0 if window.occluders is None else 1.0 - window.occluders
@@ -353,7 +348,7 @@ class Aligner:
             """View matching over the candidate orientations: the best view of each resting
             orientation (the best few) goes on to keypoints and refinement."""
             if plain:
-                rotations = candidates_sphere(cfg.views, cfg.rolls, -_unit(anchor))
+                rotations = candidates_sphere(cfg.views, cfg.rolls, -unit(anchor))
             else:
                 rotations = candidates_plane(mesh, plane.normal, symmetric, cfg.yaw_steps,
                                              cfg.max_rests)
@@ -410,8 +405,8 @@ class Aligner:
                     except AlignError:
                         continue
                     R, t, scale = refine(R, t, scale)
-                iou = silhouette_iou(self._silhouette(R, t, scale, window), window.obs,
-                                     window.occluders)
+                iou = mask_iou(self._silhouette(R, t, scale, window), window.obs,
+                               window.occluders)
                 if best is None or iou + prior > best[0]:
                     best = (iou + prior, iou, i, R, t, scale, view, diag)
         if best is None:
