@@ -75,9 +75,10 @@ def run_set(root: Path, work: Path, cfg: Config, one_core, grasps: bool = False)
             with one_core():
                 start = time.perf_counter()
                 try:
-                    pipe.ensure_upstream(frame, t)
+                    state = pipe.state(frame)
+                    pipe.ensure_upstream(state, t)
                     t0 = time.perf_counter()
-                    depth, ids = pipe.repaired_depth(frame)
+                    depth, ids = pipe.repaired_depth(state)
                     t["render"] = time.perf_counter() - t0
                 except Exception as exc:  # a frame the pipeline fails on counts as raw depth
                     print(f"{staged.frame_key(fid)}: failed: {exc}", file=sys.stderr)

@@ -113,9 +113,10 @@ def run_methods(source, fid, cfg_default: Config, cfg_paper: Config, work: Path,
                               [1.0] * (len(np.unique(ids)) - 1), ids.shape, "glass", 1)
             stages.write_instances(scene, fid, inst, "import")
         start = time.perf_counter()
-        pipe.ensure_upstream(f, t)
+        state = pipe.state(f)
+        pipe.ensure_upstream(state, t)
         t0 = time.perf_counter()
-        depth, ids = pipe.repaired_depth(f)
+        depth, ids = pipe.repaired_depth(state)
         t["render"] = time.perf_counter() - t0
         t["total"] = time.perf_counter() - start
         timings.setdefault(name, []).append(t)
@@ -249,7 +250,8 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
         staged = type(source)(source.root, out=work / "synthetic" / "sr3d" / source.name,
                               name=source.name, io=source.io)
         frame = staged.load_frame(fid)
-        depth, _ = Pipeline(cfg).repaired_depth(frame)
+        pipe = Pipeline(cfg)
+        depth, _ = pipe.repaired_depth(pipe.state(frame))
         write_depth(staged.output_path("repaired", fid), depth, frame.camera.depth_scale)
         seconds += _plan_draws(staged, fid, planners, by_draw, cfg)
         raw = type(source)(source.root, out=work / "grasp_raw" / source.name, name=source.name,
@@ -268,8 +270,9 @@ def _repair(pipeline: Pipeline, frame) -> np.ndarray:
     """Run the frame's missing stages and write its repaired depth; returns it, (H, W) m."""
     from sr3d_cli.io.images import write_depth
 
-    pipeline.ensure_upstream(frame)
-    depth, _ = pipeline.repaired_depth(frame)
+    state = pipeline.state(frame)
+    pipeline.ensure_upstream(state)
+    depth, _ = pipeline.repaired_depth(state)
     write_depth(frame.scene.output_path("repaired", frame.frame_id), depth,
                 frame.camera.depth_scale)
     return depth
@@ -531,9 +534,10 @@ def speed_bench(work: Path, frames: int = 12) -> dict:
             frame = scene.load_frame("000000")
             t = {}
             start = time.perf_counter()
-            pipe.ensure_upstream(frame, t)
+            state = pipe.state(frame)
+            pipe.ensure_upstream(state, t)
             t0 = time.perf_counter()
-            depth, _ = pipe.repaired_depth(frame)
+            depth, _ = pipe.repaired_depth(state)
             write_depth(scene.output_path("repaired", "000000", ".png"), depth,
                         frame.camera.depth_scale)
             t["render"] = time.perf_counter() - t0
