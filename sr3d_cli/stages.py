@@ -209,7 +209,10 @@ class FrameState:
         self._plane = None  # fitted with the objects left out
 
     def plane(self) -> tuple[Plane | None, str | None]:
-        """The table, fitted once for every stage (:func:`frame_plane`), or (None, why)."""
+        """The table with the instances left out (:func:`frame_plane`), or (None, why): fitted
+        once, for every stage after segment. Segment finds the objects on a table it fits
+        before there are any (all the readings, at its working size); the placed objects
+        come out better on this one, which needs the masks (the bench's depth MAE)."""
         if self._plane is None:
             self._plane = frame_plane(self.frame, self.instances()[0], self.plane_cfg)
         return self._plane
