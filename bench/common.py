@@ -52,9 +52,10 @@ def timed_repair(pipeline, frame, timings: dict, write: bool = False
     each stage run, ``render`` (the write included) and ``total``; on an error it keeps those
     of the stages that ran."""
     start = time.perf_counter()
-    pipeline.ensure_upstream(frame, timings)
+    state = pipeline.state(frame)
+    pipeline.ensure_upstream(state, timings)
     t0 = time.perf_counter()
-    depth, ids = pipeline.repaired_depth(frame)
+    depth, ids = pipeline.repaired_depth(state)
     if write:
         write_depth(frame.scene.output_path("repaired", frame.frame_id), depth,
                     frame.camera.depth_scale)

@@ -190,7 +190,8 @@ def grasp_bench(synth: Path, work: Path, cfg: Config) -> dict:
         fid = "000000"
         repaired = staged(source, work / "synthetic" / "sr3d" / source.name)
         frame = repaired.load_frame(fid)
-        depth, _ = Pipeline(cfg).repaired_depth(frame)
+        pipe = Pipeline(cfg)
+        depth, _ = pipe.repaired_depth(pipe.state(frame))
         write_depth(repaired.output_path("repaired", fid), depth, frame.camera.depth_scale)
         seconds += _plan_draws(repaired, fid, planners, by_draw, cfg)
         raw = staged(source, work / "grasp_raw" / source.name)
@@ -487,7 +488,8 @@ def mesh_bench(synth: Path) -> dict:
     from sr3d_cli.evaluate import chamfer_distance, instance_ious
     from sr3d_cli.geometry.revolution import profile_from_mesh, revolve
     from sr3d_cli.reconstruct import ObjectError, check_border, check_mask, configured_fit
-    from sr3d_cli.segment import Segmenter, support_plane
+    from sr3d_cli.geometry.plane import support_plane
+    from sr3d_cli.segment import Segmenter
 
     segmenter = Segmenter(SegmentConfig(), PlaneConfig())
     result: dict = {}

@@ -1,10 +1,13 @@
-"""Exception types shared by the core and the command line.
+"""Exception types shared by the core and the command line, and the problems that do not fail
+a frame.
 
-The core raises these; only ``sr3d_cli.cli`` turns them into messages and exit codes.
+The core raises these, or returns :class:`Problem` values; only ``sr3d_cli.cli`` turns them into
+messages and exit codes.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 
@@ -46,3 +49,17 @@ class MissingExtraError(Sr3dError, ImportError):
             f"{feature} needs the optional package '{package}': "
             f"pip install 'sr3d-cli[{extra}]' (or: pip install {package})"
         )
+
+
+@dataclass(frozen=True)
+class Problem:
+    """What went wrong in a stage without failing the frame: with one object (``obj``, its id)
+    or with the frame (``obj`` None). ``upstream``: it follows from an earlier stage's problem
+    with that object (no mesh where reconstruct made none), which that stage reports."""
+
+    text: str
+    obj: int | None = None
+    upstream: bool = False
+
+    def __str__(self) -> str:
+        return self.text if self.obj is None else f"object {self.obj}: {self.text}"

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sr3d_cli.errors import InputError
+from sr3d_cli.geometry.silhouette import mask_iou
 
 METRICS = ("rmse", "rel", "mae", "delta_1.05", "delta_1.10", "delta_1.25")
 DELTAS = {"delta_1.05": 1.05, "delta_1.10": 1.10, "delta_1.25": 1.25}
@@ -259,13 +260,7 @@ def instance_ious(pred_ids: np.ndarray, gt_ids: np.ndarray) -> dict[int, float]:
         if g <= 0:
             continue
         gm = gt_ids == g
-        best = 0.0
-        for p in preds:
-            pm = pred_ids == p
-            inter = np.count_nonzero(gm & pm)
-            if inter:
-                best = max(best, inter / np.count_nonzero(gm | pm))
-        out[int(g)] = float(best)
+        out[int(g)] = float(max((mask_iou(gm, pred_ids == p) for p in preds), default=0.0))
     return out
 
 

@@ -3,9 +3,12 @@ depth.
 
 A stage output is current when what it records it was made from (config keys, upstream files:
 :mod:`sr3d_cli.io.provenance`) matches what it would be made from now; a stale one is made again
-(or, with ``keep_stale``, kept with a message), and so is every stage from ``redo`` on. Stage
-objects (segmenter, reconstructor, aligner, renderer) are made once per batch, lazily, so a run
-that finds every upstream output on disk and current loads no model.
+(or, with ``keep_stale``, kept with a message), and so is every stage from ``redo`` on. The
+frame's stage data lives in one :class:`~sr3d_cli.stages.FrameState` (:meth:`Pipeline.state`):
+the table is fitted once for every stage, each stage takes what an earlier one made in memory
+and writes its own outputs once, and outputs that were current are read once. Stage objects
+(segmenter, reconstructor, aligner, renderer) are made once per batch, lazily, so a run that
+finds every upstream output on disk and current loads no model.
 """
 
 from __future__ import annotations
@@ -14,10 +17,11 @@ import logging
 
 import numpy as np
 
-from sr3d_cli.config import Config
-from sr3d_cli.io.scene import Frame
 from sr3d_cli import stages
+from sr3d_cli.config import Config
+from sr3d_cli.errors import Problem
 from sr3d_cli.io.provenance import STAGES
+from sr3d_cli.io.scene import Frame
 
 log = logging.getLogger("sr3d")
 
@@ -59,6 +63,11 @@ class Pipeline:
             self._renderer = make_renderer(self.cfg.render.backend)
         return self._renderer
 
+    def state(self, frame: Frame) -> stages.FrameState:
+        """A frame's stage data, to pass to :meth:`ensure_upstream` and
+        :meth:`repaired_depth`."""
+        return stages.FrameState(frame, self.cfg.plane, self.cfg.reconstruct.masks)
+
     def upstream_stages(self) -> list[str]:
         """The stages before repair this config runs: segment only where masks come from it."""
         first = "segment" if self.cfg.reconstruct.masks == "segment" else "reconstruct"
@@ -80,54 +89,51 @@ class Pipeline:
                 return f"{stage}: {why}"
         return None
 
-    def ensure_upstream(self, frame: Frame, timings: dict | None = None,
-                        redo: str | None = None, keep_stale: bool = False) -> list[str]:
+    def ensure_upstream(self, state: stages.FrameState, timings: dict | None = None,
+                        redo: str | None = None, keep_stale: bool = False) -> list[Problem]:
         """Segment, reconstruct and align where their outputs are missing, stale, or from
-        ``redo`` on; with ``keep_stale`` a stale output is kept and a message says so."""
+        ``redo`` on, each taking its inputs from ``state`` and leaving its outputs there; with
+        ``keep_stale`` a stale output is kept and a problem says so. ``timings``: seconds per
+        stage run, filled in."""
         import time
 
-        source, fid = frame.scene, frame.frame_id
-        messages: list[str] = []
+        source, fid = state.source, state.frame_id
+        problems: list[Problem] = []
         timings = {} if timings is None else timings
-        which = self.cfg.reconstruct.masks
         for stage in self.upstream_stages():
             why = self.why_run(source, fid, stage, redo)
             if why is None:
                 continue
-            if keep_stale and why != "missing" and not why.startswith("--redo"):
-                messages.append(f"{stage} output kept though stale ({why}; --keep-stale)")
+            redone = redo is not None and STAGES.index(stage) >= STAGES.index(redo)
+            if keep_stale and why != stages.MISSING and not redone:
+                problems.append(Problem(f"{stage} output kept though stale ({why}; "
+                                        "--keep-stale)"))
                 continue
-            if why != "missing":
-                log.info("%s: %s made again (%s)", frame.key, stage, why)
+            if why != stages.MISSING:
+                log.info("%s: %s made again (%s)", state.frame.key, stage, why)
             record = stages.stage_record(self.cfg, source, fid, stage)
             t = time.perf_counter()
             if stage == "segment":
-                inst = self.segmenter(fid, frame.rgb, frame.depth_m, frame.camera.K)
-                stages.write_instances(source, fid, inst, self.cfg.segment.backend, record)
+                stages.segment_frame(state, self.segmenter, self.cfg.segment.backend, record)
             elif stage == "reconstruct":
-                _, msgs = stages.reconstruct_frame(frame, self.reconstructor, self.cfg.plane,
-                                                   which, record)
-                messages += msgs
-            else:
-                _, msgs = stages.align_frame(frame, self.aligner, self.cfg.plane, which,
-                                             record=record)
-                messages += [m for m in msgs if "no mesh" not in m]
+                problems += stages.reconstruct_frame(state, self.reconstructor, record)[1]
+            else:  # an object without a mesh is reconstruct's problem, reported there
+                found = stages.align_frame(state, self.aligner, record)[1]
+                problems += [p for p in found if not p.upstream]
             timings[stage] = time.perf_counter() - t
-        return messages
+        return problems
 
-    def repaired_depth(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
-        """(repaired depth (H, W) float32 metres, instance ids) from the stage outputs on disk."""
-        source, fid = frame.scene, frame.frame_id
-        ids, _ = stages.load_instances(source, fid, frame.depth_m.shape,
-                                       self.cfg.reconstruct.masks)
+    def repaired_depth(self, state: stages.FrameState) -> tuple[np.ndarray, np.ndarray]:
+        """(repaired depth (H, W) float32 metres, instance ids (H, W) int32) from the frame's
+        stage data (:meth:`ensure_upstream` first)."""
+        frame = state.frame
+        ids, _ = state.instances()
         placed = []
-        for obj in stages.load_poses(source, fid):
-            mesh = stages.load_mesh(stages.find_mesh(source, fid, obj["id"]))
-            placed.append((int(obj["id"]), mesh, np.asarray(obj["T_cam_obj"], dtype=np.float64),
+        for obj in state.pose_document().get("objects", []):
+            k = int(obj["id"])
+            placed.append((k, state.mesh(k), np.asarray(obj["T_cam_obj"], dtype=np.float64),
                            float(obj["scale"])))
-        plane = None
-        if self.cfg.repair.outside_render == "plane":
-            plane, _ = stages.frame_plane(frame, ids, self.cfg.plane)
+        plane = state.plane()[0] if self.cfg.repair.outside_render == "plane" else None
         from sr3d_cli.repair import repair_frame
 
         depth = repair_frame(frame.depth_m, ids, frame.camera, self.renderer, placed,

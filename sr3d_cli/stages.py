@@ -1,8 +1,12 @@
 """Per-frame stage runs on scene folders: read a stage's inputs, call the core, write outputs.
 
 The commands in :mod:`sr3d_cli.cli` loop over frames and report; this module knows which file
-each stage reads and writes (DESIGN.md, "Scene folder"). Object-level problems do not fail the
-frame: they are returned as messages and recorded in the stage's JSON.
+each stage reads and writes (DESIGN.md, "Scene folder"). A frame's stage data is held by one
+:class:`FrameState`: each stage takes its inputs from it (what an earlier stage made in the same
+run, or else its files, each read once) and puts its outputs there as it writes them, so a run
+of several stages fits the table once and reads back nothing it wrote, and each stage still
+runs alone from the files. Object-level problems do not fail the frame: they are returned as
+:class:`~sr3d_cli.errors.Problem` values and recorded in the stage's JSON.
 """
 
 from __future__ import annotations
@@ -14,11 +18,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from sr3d_cli.errors import InputError
+from sr3d_cli.errors import InputError, Problem
 from sr3d_cli.geometry.occlusion import occluders, opaque_objects
-from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.plane import Plane, support_plane
 from sr3d_cli.geometry.transforms import place_points
-from sr3d_cli.io import provenance
+from sr3d_cli.io import images, provenance
 from sr3d_cli.io.atomic import write_bytes, write_json, write_npy, write_png
 from sr3d_cli.io.scene import Frame, SceneSource
 
@@ -29,10 +33,13 @@ log = logging.getLogger("sr3d")
 RECORD_FILES = {"segment": ("masks", ".json"), "reconstruct": ("meshes", ".json"),
                 "align": ("poses", ".json"), "repair": ("repaired", ".json"),
                 "grasp": ("grasps", ".json")}
+MISSING = "missing"  # why a stage must run whose output is not there (:func:`stale`)
 
 
 def write_instances(source: SceneSource, frame_id: str, instances, backend: str,
                     record: dict | None = None) -> None:
+    """masks/<frame>.png (the ids, 8 or 16 bits) and masks/<frame>.json (the records of
+    :class:`~sr3d_cli.segment.Instances`, the backend, ``record``)."""
     ids = instances.ids
     dtype = np.uint8 if ids.max(initial=0) <= 255 else np.uint16
     document = instances.to_json(backend)
@@ -92,23 +99,42 @@ def load_instances(source: SceneSource, frame_id: str, shape: tuple[int, int],
     if path is None:
         raise InputError(source.out / "masks" / f"{frame_id}.png",
                          "no masks for this frame: run `sr3d segment` first")
-    ids = source.load_mask(path, shape)
-    records = {int(k): {"id": int(k), "label": ""} for k in np.unique(ids) if k > 0}
+    ids = images.read_mask(path)  # sr3d's own ids, whatever the layout: never split
+    if ids.shape != tuple(shape):
+        raise InputError(path, f"mask is {ids.shape[1]}x{ids.shape[0]} but the images are "
+                               f"{shape[1]}x{shape[0]}")
     meta = path.with_suffix(".json")
-    if meta.is_file():
-        try:
-            for obj in json.loads(meta.read_text(encoding="utf-8")).get("objects", []):
-                if int(obj.get("id", -1)) in records:
-                    records[int(obj["id"])] = obj
-        except (ValueError, OSError, TypeError) as exc:
-            raise InputError(meta, f"cannot read instance records ({exc})") from None
-    return ids, records
+    if not meta.is_file():
+        return ids, instance_records(ids, [])
+    try:
+        objects = json.loads(meta.read_text(encoding="utf-8")).get("objects", [])
+        return ids, instance_records(ids, objects)
+    except (ValueError, OSError, TypeError, AttributeError) as exc:
+        raise InputError(meta, f"cannot read instance records ({exc})") from None
+
+
+def instance_records(ids: np.ndarray, objects: list[dict]) -> dict[int, dict]:
+    """{id: record} of every id in ``ids (H, W) int32`` (0 = background): its entry in
+    ``objects`` (masks/<frame>.json), else ``{"id", "label": ""}``."""
+    records = {int(k): {"id": int(k), "label": ""} for k in np.unique(ids) if k > 0}
+    for obj in objects:
+        if int(obj.get("id", -1)) in records:
+            records[int(obj["id"])] = obj
+    return records
+
+
+def segment_frame(state: "FrameState", segmenter, backend: str, record: dict | None = None):
+    """Segment a frame: writes masks/<frame>.png and .json (:func:`write_instances`), keeps the
+    instances in ``state`` and returns them (:class:`~sr3d_cli.segment.Instances`)."""
+    frame = state.frame
+    instances = segmenter(frame.frame_id, frame.rgb, frame.depth_m, frame.camera.K)
+    write_instances(frame.scene, frame.frame_id, instances, backend, record)
+    state.segmented(instances.ids, instances.objects)
+    return instances
 
 
 def frame_plane(frame: Frame, ids: np.ndarray, plane_cfg) -> tuple[Plane | None, str | None]:
     """The support plane with the objects left out, or (None, reason)."""
-    from sr3d_cli.segment import support_plane
-
     try:
         return support_plane(frame.depth_m, frame.camera.K, plane_cfg, exclude=ids > 0), None
     except ValueError as exc:
@@ -129,14 +155,129 @@ def find_mesh(source: SceneSource, frame_id: str, obj_id: int):
     return hit if hit is not None else mesh_path(source, frame_id, obj_id)
 
 
-def write_mesh(path, mesh: trimesh.Trimesh) -> None:
-    write_bytes(path, mesh.export(file_type="ply", encoding="binary"))
+def write_mesh(path, mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, str]:
+    """Write ``mesh`` as binary PLY; returns the mesh as the file holds it (vertices rounded to
+    float32, as :func:`load_mesh` reads them back) and the file's fingerprint."""
+    data = mesh.export(file_type="ply", encoding="binary")
+    write_bytes(path, data)
+    stored = trimesh.Trimesh(np.asarray(mesh.vertices, np.float32).astype(np.float64),
+                             np.asarray(mesh.faces, np.int64), process=False)
+    return stored, provenance.digest(data)
 
 
 def _with_opaque(frame: Frame, ids: np.ndarray, plane) -> np.ndarray:
     """The instances with the opaque objects the raw depth sees added (:func:`opaque_objects`):
     what may stand in front of an instance and hide its foot."""
     return ids if plane is None else opaque_objects(ids, frame.depth_m, frame.camera.K, plane)
+
+
+class FrameState:
+    """One frame's stage data, each piece read or computed once: the instances, the table, the
+    objects' meshes, the poses. A stage that runs puts what it writes here (as its files hold
+    it); what no stage made in this run is read from the stage outputs on first use.
+
+    frame : the frame; plane_cfg : the ``plane`` config; which_masks : where the instances
+    come from (``segment``, ``gt`` or a folder, :func:`load_instances`).
+    """
+
+    def __init__(self, frame: Frame, plane_cfg, which_masks: str = "segment"):
+        self.frame, self.plane_cfg, self.which_masks = frame, plane_cfg, which_masks
+        self._instances: tuple[np.ndarray, dict[int, dict]] | None = None
+        self._plane: tuple[Plane | None, str | None] | None = None
+        self._made: dict[int, tuple[trimesh.Trimesh, dict, trimesh.Trimesh | None]] | None = None
+        self._read: dict[int, trimesh.Trimesh] = {}
+        self._poses: dict | None = None
+
+    @property
+    def source(self) -> SceneSource:
+        return self.frame.scene
+
+    @property
+    def frame_id(self) -> str:
+        return self.frame.frame_id
+
+    def instances(self) -> tuple[np.ndarray, dict[int, dict]]:
+        """Instance ids ``(H, W) int32`` and {id: record}: segmented in this run, else read."""
+        if self._instances is None:
+            self._instances = load_instances(self.source, self.frame_id,
+                                             self.frame.depth_m.shape, self.which_masks)
+        return self._instances
+
+    def segmented(self, ids: np.ndarray, objects: list[dict]) -> None:
+        """The instances segment made: ids ``(H, W) int32``, one record per id."""
+        self._instances = (ids, instance_records(ids, objects))
+        self._plane = None  # fitted with the objects left out
+
+    def plane(self) -> tuple[Plane | None, str | None]:
+        """The table with the instances left out (:func:`frame_plane`), or (None, why): fitted
+        once, for every stage after segment. Segment finds the objects on a table it fits
+        before there are any (all the readings, at its working size); the placed objects
+        come out better on this one, which needs the masks (the bench's depth MAE)."""
+        if self._plane is None:
+            self._plane = frame_plane(self.frame, self.instances()[0], self.plane_cfg)
+        return self._plane
+
+    def reconstructed(self, made: dict[int, tuple[trimesh.Trimesh, dict,
+                                                  trimesh.Trimesh | None]]) -> None:
+        """The meshes reconstruct wrote in this run: {id: (mesh, meta, open alternative or
+        None)}, as their files hold them; an id without one is looked up in the files."""
+        self._made, self._read = made, {}
+
+    def has_mesh(self, k: int) -> bool:
+        return (self._made is not None and k in self._made) or \
+            find_mesh(self.source, self.frame_id, k).is_file()
+
+    def mesh(self, k: int) -> trimesh.Trimesh:
+        """Object ``k``'s mesh (object frame); :class:`InputError` naming the file where there
+        is none or it cannot be read."""
+        if self._made is not None and k in self._made:
+            return self._made[k][0]
+        if k not in self._read:
+            path = find_mesh(self.source, self.frame_id, k)
+            if not path.is_file():
+                raise InputError(path, "no mesh: run `sr3d reconstruct` first")
+            self._read[k] = load_mesh(path)
+        return self._read[k]
+
+    def mesh_meta(self, k: int) -> dict:
+        """meshes/<frame>/<k>.json of object ``k`` ({} where there is none or it is unreadable)."""
+        if self._made is not None and k in self._made:
+            return self._made[k][1]
+        try:
+            meta = json.loads(find_mesh(self.source, self.frame_id, k).with_suffix(".json")
+                              .read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return {}
+        return meta if isinstance(meta, dict) else {}
+
+    def pose_hint(self, k: int) -> tuple[np.ndarray, float] | None:
+        """The pose ``(T_cam_obj (4, 4), scale)`` reconstruct fitted on its way, if any."""
+        try:
+            hint = self.mesh_meta(k)["pose_hint"]
+            return np.asarray(hint["T_cam_obj"], dtype=np.float64), float(hint["scale"])
+        except (KeyError, TypeError, ValueError):
+            return None
+
+    def open_alternative(self, k: int) -> trimesh.Trimesh | None:
+        """Object ``k`` opened where its mouth likely is (``open_alternative`` in its meta, in
+        the mesh's own object frame), if reconstruct made one."""
+        if self._made is not None and k in self._made:
+            return self._made[k][2]
+        try:
+            name = self.mesh_meta(k)["open_alternative"]
+            return load_mesh(find_mesh(self.source, self.frame_id, k).with_name(name))
+        except (OSError, ValueError, KeyError, TypeError):
+            return None
+
+    def placed(self, document: dict) -> None:
+        """The pose document align wrote in this run (:func:`align_frame`)."""
+        self._poses = document
+
+    def pose_document(self) -> dict:
+        """poses/<frame>.json: placed in this run, else read (:func:`load_pose_document`)."""
+        if self._poses is None:
+            self._poses = load_pose_document(self.source, self.frame_id)
+        return self._poses
 
 
 def stage_inputs(source: SceneSource, frame_id: str, stage: str, which_masks: str = "segment",
@@ -176,25 +317,25 @@ def record_path(source: SceneSource, frame_id: str, stage: str):
 
 
 def stale(cfg, source: SceneSource, frame_id: str, stage: str) -> str | None:
-    """Why a stage's output of this frame must be made again: ``"missing"``, the first
+    """Why a stage's output of this frame must be made again: :data:`MISSING`, the first
     difference from its record, or None (current, or made elsewhere without a record)."""
     path = record_path(source, frame_id, stage)
     if path is None:
-        return "missing"
+        return MISSING
     return provenance.stale_reason(provenance.read_record(path),
                                    stage_record(cfg, source, frame_id, stage))
 
 
-def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str,
-                      record: dict | None = None) -> tuple[int, list[str]]:
-    """Reconstruct every instance of a frame; returns (meshes written, object messages).
+def reconstruct_frame(state: FrameState, reconstructor, record: dict | None = None
+                      ) -> tuple[int, list[Problem]]:
+    """Reconstruct every instance of a frame; returns (meshes written, object problems).
     Writes ``meshes/<frame>.json`` (the meshes written, with their fingerprints, the object
-    messages, ``frame_failed`` where there are instances and no mesh, and ``record``) and removes
-    meshes of an earlier run no instance has now."""
-    source, fid = frame.scene, frame.frame_id
-    ids, records = load_instances(source, fid, frame.depth_m.shape, which_masks)
-    plane, why = frame_plane(frame, ids, plane_cfg)
-    written, messages, made = 0, [], {}
+    problems, ``frame_failed`` where there are instances and no mesh, and ``record``), removes
+    meshes of an earlier run no instance has now, and keeps the meshes in ``state``."""
+    frame, source, fid = state.frame, state.source, state.frame_id
+    ids, records = state.instances()
+    plane, why = state.plane()
+    problems, made, kept = [], {}, {}
     seen = _with_opaque(frame, ids, plane)
     for k in sorted(records):
         try:
@@ -204,29 +345,29 @@ def reconstruct_frame(frame: Frame, reconstructor, plane_cfg, which_masks: str,
             result = reconstructor(frame.rgb, ids == k, frame.camera.K, plane,
                                    records[k].get("label", ""), frame.depth_m, front)
         except ValueError as exc:  # ObjectError, and model/fit failures of this object
-            messages.append(f"object {k}: {exc}")
+            problems.append(Problem(str(exc), k))
             continue
-        write_mesh(mesh_path(source, fid, k), result.mesh)
-        meta = result.meta
+        mesh, made[str(k)] = write_mesh(mesh_path(source, fid, k), result.mesh)
+        meta, opened = result.meta, None
         if result.open_alternative is not None:
-            opened = mesh_path(source, fid, k, OPEN_SUFFIX)
-            write_mesh(opened, result.open_alternative)
-            meta = {**meta, "open_alternative": opened.name}
+            path = mesh_path(source, fid, k, OPEN_SUFFIX)
+            opened, _ = write_mesh(path, result.open_alternative)
+            meta = {**meta, "open_alternative": path.name}
         write_json(mesh_path(source, fid, k, ".json"), meta)
-        written += 1
-        made[str(k)] = provenance.fingerprint(mesh_path(source, fid, k))
+        kept[k] = (mesh, meta, opened)
     folder = source.out / "meshes" / fid
     if folder.is_dir():  # meshes of an earlier run that no instance of this one has
         for path in folder.iterdir():
             if path.stem.split("_")[0] not in made and path.stem.split("_")[0].isdigit():
                 path.unlink()
-    document = {"objects": made, "failed": messages}
+    document = {"objects": made, "failed": [str(p) for p in problems]}
     if records and not made:
-        document["frame_failed"] = "no mesh made (" + "; ".join(messages) + ")"
+        document["frame_failed"] = "no mesh made (" + "; ".join(map(str, problems)) + ")"
     if record is not None:
         document[provenance.RECORD_KEY] = record
     write_json(source.output_path("meshes", fid, ".json"), document)
-    return written, messages
+    state.reconstructed(kept)
+    return len(made), problems
 
 
 def load_mesh(path) -> trimesh.Trimesh:
@@ -243,59 +384,42 @@ def load_mesh(path) -> trimesh.Trimesh:
     return mesh
 
 
-def _open_alternative(path) -> trimesh.Trimesh | None:
-    """The object opened where its mouth likely is (``open_alternative`` in
-    meshes/<frame>/<k>.json, in the mesh's own object frame), if reconstruct wrote one."""
-    try:
-        meta = json.loads(path.with_suffix(".json").read_text(encoding="utf-8"))
-        return load_mesh(path.with_name(meta["open_alternative"]))
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-
-
-def _pose_hint(path) -> tuple[np.ndarray, float] | None:
-    """The pose a reconstruction fitted on its way (meshes/<frame>/<k>.json), if any."""
-    try:
-        hint = json.loads(path.read_text(encoding="utf-8"))["pose_hint"]
-        return np.asarray(hint["T_cam_obj"], dtype=np.float64), float(hint["scale"])
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-
-
-def align_frame(frame: Frame, aligner, plane_cfg, which_masks: str = "segment",
-                bop: bool = False, record: dict | None = None) -> tuple[list[dict], list[str]]:
+def align_frame(state: FrameState, aligner, record: dict | None = None
+                ) -> tuple[list[dict], list[Problem]]:
     """Place every reconstructed object; writes ``poses/<id>.json`` (``frame_failed`` where
-    there are instances and none was placed). Returns (objects, messages)."""
-    source, fid = frame.scene, frame.frame_id
-    ids, records = load_instances(source, fid, frame.depth_m.shape, which_masks)
-    plane, why = frame_plane(frame, ids, plane_cfg)
-    objects, messages = [], []
+    there are instances and none was placed) and keeps it in ``state``. Returns (objects,
+    problems); an object without a mesh is an ``upstream`` problem (reconstruct's)."""
+    frame, source, fid = state.frame, state.source, state.frame_id
+    ids, records = state.instances()
+    plane, why = state.plane()
+    objects, problems = [], []
     seen = _with_opaque(frame, ids, plane)
     for k in sorted(records):
-        path = find_mesh(source, fid, k)
+        if not state.has_mesh(k):
+            problems.append(Problem("no mesh: run `sr3d reconstruct` first", k, upstream=True))
+            continue
         try:
-            if not path.is_file():
-                raise ValueError("no mesh: run `sr3d reconstruct` first")
             if plane is None:
                 raise ValueError(why)
-            placement = aligner(load_mesh(path), ids == k, frame.camera.K, plane, frame.depth_m,
-                                hint=_pose_hint(path.with_suffix(".json")),
+            placement = aligner(state.mesh(k), ids == k, frame.camera.K, plane, frame.depth_m,
+                                hint=state.pose_hint(k),
                                 occluders=occluders(seen, k, frame.camera.K, plane))
         except ValueError as exc:
-            messages.append(f"object {k}: {exc}")
+            problems.append(Problem(str(exc), k))
             continue
         objects.append({"id": k, "label": records[k].get("label", ""),
-                        "mesh": f"meshes/{fid}/{k}.ply", "T_cam_obj": placement.T_cam_obj,
-                        "scale": placement.scale, "scores": placement.scores,
+                        "mesh": f"meshes/{fid}/{k}.ply", "T_cam_obj": placement.T_cam_obj.tolist(),
+                        "scale": float(placement.scale), "scores": placement.scores,
                         "diagnostics": placement.diagnostics})
-    document = {"objects": objects, "failed": messages,
+    document = {"objects": objects, "failed": [str(p) for p in problems],
                 "plane": plane.to_json() if plane is not None else None}
     if records and not objects:
-        document["frame_failed"] = "no object placed (" + "; ".join(messages) + ")"
+        document["frame_failed"] = "no object placed (" + "; ".join(map(str, problems)) + ")"
     if record is not None:
         document[provenance.RECORD_KEY] = record
     write_json(source.output_path("poses", fid, ".json"), document)
-    return objects, messages
+    state.placed(document)
+    return objects, problems
 
 
 def load_pose_document(source: SceneSource, frame_id: str) -> dict:
@@ -351,30 +475,33 @@ def _read_prediction(source: SceneSource, stage: str, frame_id: str, shape) -> n
 def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired",
                 only: int | None = None, hand_poses: float | None = None,
                 which_masks: str = "segment", record: dict | None = None
-                ) -> tuple[int, list[str], str | None]:
+                ) -> tuple[int, list[Problem], str | None]:
     """Plan grasps for one frame; writes ``grasps/<id>.json`` and ``.npy`` (an empty but valid
-    file, with the reason, when nothing can be planned). Returns (grasps, object messages, why
-    the frame failed): a frame fails when an input is missing or unreadable, or when it has
+    file, with the reason, when nothing can be planned). Returns (grasps, problems, why the
+    frame failed): a frame fails when an input is missing or unreadable, or when it has
     objects and none of them got a grasp; a frame without objects does not."""
     from sr3d_cli.grasp import GraspSet
 
+    state = FrameState(frame, plane_cfg, which_masks)
     source, fid = frame.scene, frame.frame_id
-    grasps, messages, failure = GraspSet.empty(), [], None
+    grasps, problems, failure = GraspSet.empty(), [], None
     try:
-        ids, _ = load_instances(source, fid, frame.depth_m.shape, which_masks)
+        ids, _ = state.instances()
         if only is not None and not (ids == only).any():
             raise InputError(masks_path(source, fid, which_masks) or fid,
                              f"object {only} is not in this frame's masks")
         if not (ids > 0).any():
-            messages.append("no objects in the masks: nothing to grasp")
+            problems.append(Problem("no objects in the masks: nothing to grasp"))
         else:
-            grasps, messages = _plan_frame(frame, planner, plane_cfg, depth_source, only, ids)
+            grasps, said = _plan_frame(state, planner, depth_source, only)
+            problems = [Problem(text) for text in said]  # the planner names each object
             if len(grasps) == 0:
-                failure = "no grasp for any object (" + "; ".join(messages) + ")"
+                failure = "no grasp for any object (" + "; ".join(said) + ")"
     except (InputError, ValueError) as exc:
-        messages.append(str(exc))
+        problems.append(Problem(str(exc)))
         failure = str(exc)
-    document = {"source": depth_source, "grasps": grasps.to_json(), "failed": messages,
+    document = {"source": depth_source, "grasps": grasps.to_json(),
+                "failed": [str(p) for p in problems],
                 "frame": "camera (OpenCV), metres; grasp x = approach, y = closing direction, "
                          "position = grasp centre; fingertips reach `depth` past it"}
     if failure is not None:
@@ -386,23 +513,23 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
     if hand_poses is not None:
         write_npy(source.output_path("grasps", fid, "_hand_poses.npy"),
                   grasps.hand_poses(hand_poses))
-    return len(grasps), messages, failure
+    return len(grasps), problems, failure
 
 
-def _plan_frame(frame: Frame, planner, plane_cfg, depth_source: str, only: int | None,
-                ids: np.ndarray):
-    """(grasps, object messages) of a frame with objects ``ids`` (H, W) int32."""
+def _plan_frame(state: FrameState, planner, depth_source: str, only: int | None):
+    """(grasps, object messages) of a frame with objects (``state.instances()``)."""
     from sr3d_cli.grasp.planner import Cloud, depth_cloud, in_view, mesh_cloud
 
-    source, fid, K = frame.scene, frame.frame_id, frame.camera.K
+    frame, source, fid, K = state.frame, state.source, state.frame_id, state.frame.camera.K
+    ids, _ = state.instances()
     cfg = planner.cfg
     depth = frame.depth_m if depth_source == "raw" else \
         _read_prediction(source, "repaired", fid, frame.depth_m.shape)
-    poses = load_pose_document(source, fid) if depth_source == "repaired" else {}
-    # the table align placed the objects on, else (raw depth, or none recorded) a fresh fit
+    poses = state.pose_document() if depth_source == "repaired" else {}
+    # the table align placed the objects on, else (raw depth, or none recorded) the frame's
     plane = Plane.from_json(poses["plane"]) if poses.get("plane") else None
     if plane is None:
-        plane, why = frame_plane(frame, ids, plane_cfg)
+        plane, why = state.plane()
         if plane is None:
             raise ValueError(why)
     scene = depth_cloud(depth, K, ids, cfg.stride)
@@ -412,10 +539,9 @@ def _plan_frame(frame: Frame, planner, plane_cfg, depth_source: str, only: int |
         placed, opened = {}, {}
         for obj in poses.get("objects", []):
             k = int(obj["id"])
-            path = find_mesh(source, fid, k)
             T, scale = np.asarray(obj["T_cam_obj"]), float(obj["scale"])
             axes[k] = T[:3, 2]  # the object frame's z: its height (lying: its length)
-            for mesh, clouds in ((load_mesh(path), placed), (_open_alternative(path), opened)):
+            for mesh, clouds in ((state.mesh(k), placed), (state.open_alternative(k), opened)):
                 if mesh is not None:
                     clouds[k] = (mesh_cloud(mesh, T, scale, k, cfg.mesh_points, seed=k),
                                  place_points(mesh.vertices, T, scale)[mesh.faces])
@@ -456,7 +582,6 @@ def grasp_truth(source: SceneSource, frame_id: str, plane_cfg):
 
     from sr3d_cli.geometry.camera import depth_to_points
     from sr3d_cli.grasp.quality import TrueScene
-    from sr3d_cli.segment import support_plane
 
     gt = source.load_gt_objects(frame_id)
     if not gt or not gt.get("objects"):

@@ -10,7 +10,6 @@ import pytest
 import trimesh
 from click.testing import CliRunner
 
-from sr3d_cli.align.silhouette import project_mesh, surface_depth
 from sr3d_cli.cli import cli
 from sr3d_cli.config import IOConfig, ReconstructConfig
 from sr3d_cli.errors import InputError
@@ -19,13 +18,13 @@ from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.occlusion import occluders, opaque_objects
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, profile_from_mesh, revolve, silhouette
+from sr3d_cli.geometry.silhouette import project_mesh, surface_depth
 from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.io.formats import discover_scenes
-from sr3d_cli.reconstruct import (ObjectError, Reconstructor, check_border, check_mask,
-                                   revolution_fit)
-from sr3d_cli.reconstruct.revolution_fit import (RevolutionFit, _resting_tilt, axial_view_angle,
-                                                 carved, fit_revolution, smoothed,
-                                                 straight_walls)
+from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_border, check_mask
+from sr3d_cli.shape import revolution_fit
+from sr3d_cli.shape.revolution_fit import (RevolutionFit, _resting_tilt, axial_view_angle, carved,
+                                           fit_revolution, smoothed, straight_walls)
 from tests import onnx_builders
 from tests.scenes import GLASS, generated_frame, solids_on_table, table_point
 
@@ -553,7 +552,7 @@ def test_shape_error_on_generated_glassware(synth_set):
         fid = source.frame_ids()[0]
         frame = source.load_frame(fid)
         gt = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
-        from sr3d_cli.segment import support_plane
+        from sr3d_cli.geometry.plane import support_plane
         from sr3d_cli.config import PlaneConfig
 
         plane = support_plane(frame.depth_m, frame.camera.K, PlaneConfig(), exclude=gt > 0)
@@ -710,7 +709,7 @@ def test_an_open_beaker_looked_into_stands_by_the_readings_inside_it(tmp_path):
     against 29, and the beaker is laid down (a 42 mm depth error over it). A change to the
     generator redraws the scene: then pick another such beaker from generated frames."""
     from sr3d_cli.config import PlaneConfig
-    from sr3d_cli.segment import support_plane
+    from sr3d_cli.geometry.plane import support_plane
 
     source, frame, ids = generated_frame(tmp_path, 1500, 20, renderer="auto")
     truth = next(o for o in source.load_gt_objects("000000")["objects"] if o["id"] == 3)

@@ -15,7 +15,8 @@ from sr3d_cli.errors import InputError
 from sr3d_cli.evaluate import instance_ious
 from sr3d_cli.io.atomic import write_png
 from sr3d_cli.io.images import read_mask
-from sr3d_cli.segment import Segmenter, import_masks, support_plane
+from sr3d_cli.geometry.plane import support_plane
+from sr3d_cli.segment import Segmenter, import_masks
 from tests import onnx_builders
 from tests.scenes import GLASS, generated_frame, solids_on_table
 

@@ -13,7 +13,7 @@ from sr3d_cli.geometry.revolution import revolve
 from sr3d_cli.reconstruct import Reconstructor, configured_fit, mouths
 from sr3d_cli.reconstruct.bowls import NARROW_TOP, bowl_instead
 from sr3d_cli.reconstruct.handles import handle_slab, split_handle
-from sr3d_cli.reconstruct.revolution_fit import fit_revolution
+from sr3d_cli.shape.revolution_fit import fit_revolution
 from sr3d_cli.render import RenderMesh, make_renderer
 from sr3d_cli.geometry.transforms import place_points
 from tests.scenes import K_TABLE, solids_on_table, table, table_point

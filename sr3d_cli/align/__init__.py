@@ -18,15 +18,14 @@ import numpy as np
 import trimesh
 from scipy.optimize import minimize
 
-from sr3d_cli.align.silhouette import (fill_silhouette, project_mesh, silhouette_iou,
-                                       surface_depth)
 from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candidates_sphere,
                                           icosphere_directions, is_axisymmetric,
                                           resting_directions)
 from sr3d_cli.config import AlignConfig
 from sr3d_cli.geometry.camera import unproject
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.transforms import make_T, rotation_about
+from sr3d_cli.geometry.silhouette import fill_silhouette, mask_iou, project_mesh, surface_depth
+from sr3d_cli.geometry.transforms import make_T, rotation_about, unit
 
 
 class AlignError(ValueError):
@@ -44,10 +43,6 @@ class Placement:
     @property
     def T_cam_obj(self) -> np.ndarray:
         return make_T(self.R, self.t)
-
-
-def _unit(v):
-    return v / np.linalg.norm(v)
 
 
 def _ray(uv, K):
@@ -223,7 +218,7 @@ class Aligner:
         Returns (R, t, scale, silhouette (h, w) bool in ``window`` of that pose, info: the
         start's and the end's error and the renders drawn)."""
         n = plane.normal
-        e1 = _unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < 0.9 else np.cross(n, [0, 1.0, 0]))
+        e1 = unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < 0.9 else np.cross(n, [0, 1.0, 0]))
         e2 = np.cross(n, e1)
         obs = _soft(window.obs)
         shown = 1.0 if window.occluders is None else 1.0 - window.occluders
@@ -387,7 +382,7 @@ class Aligner:
             """View matching over the candidate orientations: the best view of each resting
             orientation (the best few) goes on to keypoints and refinement."""
             if plain:
-                rotations = candidates_sphere(cfg.views, cfg.rolls, -_unit(anchor))
+                rotations = candidates_sphere(cfg.views, cfg.rolls, -unit(anchor))
             else:
                 rotations = candidates_plane(mesh, plane.normal, symmetric, cfg.yaw_steps,
                                              cfg.max_rests)
@@ -455,7 +450,7 @@ class Aligner:
                 if sil is None:
                     sil = self._silhouette(R, t, scale, window)
                     renders[0] += 1
-                iou = silhouette_iou(sil, window.obs, window.occluders)
+                iou = mask_iou(sil, window.obs, window.occluders)
                 if best is None or iou + prior > best[0]:
                     best = (iou + prior, iou, i, R, t, scale, view, diag)
         if best is None:

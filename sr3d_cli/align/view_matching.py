@@ -24,7 +24,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from sr3d_cli.align.silhouette import aspect, crop_square, fill_silhouette, project_mesh
+from sr3d_cli.geometry.silhouette import fill_silhouette, project_mesh
 from sr3d_cli.geometry.transforms import rotation_about, rotation_between
 
 
@@ -34,6 +34,27 @@ class ViewScore:
     ssim: float
     edges: float
     aspect: float
+
+
+def crop_square(mask: np.ndarray, size: int) -> np.ndarray:
+    """The mask's bounding box, centred in a ``size`` x ``size`` float32 image (aspect kept)."""
+    ys, xs = np.nonzero(mask)
+    if len(xs) == 0:
+        return np.zeros((size, size), np.float32)
+    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+    crop = mask[y0:y1, x0:x1].astype(np.float32)
+    side = max(y1 - y0, x1 - x0)
+    canvas = np.zeros((side, side), np.float32)
+    oy, ox = (side - (y1 - y0)) // 2, (side - (x1 - x0)) // 2
+    canvas[oy:oy + y1 - y0, ox:ox + x1 - x0] = crop
+    return cv2.resize(canvas, (size, size), interpolation=cv2.INTER_AREA)
+
+
+def aspect(mask: np.ndarray) -> float:
+    ys, xs = np.nonzero(mask)
+    if len(xs) == 0:
+        return 1.0
+    return float((np.ptp(xs) + 1) / (np.ptp(ys) + 1))
 
 
 def is_axisymmetric(mesh: trimesh.Trimesh, tol: float = 0.01) -> bool:

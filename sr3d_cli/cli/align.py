@@ -30,19 +30,19 @@ def align(scene, mode, masks, bop, batch, out, frames, fmt):
     from sr3d_cli.errors import FrameFailed
     from sr3d_cli.io.atomic import write_json
     from sr3d_cli.io.formats.bop import bop_scene_gt
-    from sr3d_cli.stages import align_frame, load_poses, stage_record, stale
+    from sr3d_cli.stages import FrameState, align_frame, load_poses, stage_record, stale
 
     cfg = load_config({"align.mode": mode, "reconstruct.masks": masks, "io.format": fmt})
     check_masks(cfg)
     aligner = Aligner(cfg.align)
 
     def work(frame):
-        objects, messages = align_frame(
-            frame, aligner, cfg.plane, cfg.reconstruct.masks,
-            record=stage_record(cfg, frame.scene, frame.frame_id, "align"))
-        if not objects and messages:  # instances, and none placed
-            raise FrameFailed("no object placed (" + "; ".join(messages) + ")")
-        return messages
+        objects, problems = align_frame(
+            FrameState(frame, cfg.plane, cfg.reconstruct.masks), aligner,
+            stage_record(cfg, frame.scene, frame.frame_id, "align"))
+        if not objects and problems:  # instances, and none placed
+            raise FrameFailed("no object placed (" + "; ".join(map(str, problems)) + ")")
+        return problems
 
     def write_bop(scenes):
         for source in scenes:

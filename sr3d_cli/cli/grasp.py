@@ -33,7 +33,7 @@ def grasp(scene, only, depth_source, masks, hand_poses, preview, batch, out, fra
     Example:
       sr3d grasp sample_data/scene_0000 --preview
     """
-    from sr3d_cli.errors import FrameFailed
+    from sr3d_cli.errors import FrameFailed, Problem
     from sr3d_cli.grasp.planner import Planner
     from sr3d_cli.pipeline import Pipeline
     from sr3d_cli.io.atomic import write_png
@@ -47,7 +47,7 @@ def grasp(scene, only, depth_source, masks, hand_poses, preview, batch, out, fra
     pipeline = Pipeline(cfg)  # only to tell whether the stage outputs planned on are current
 
     def work(frame):
-        n, messages, failure = grasp_frame(
+        n, problems, failure = grasp_frame(
             frame, planner, cfg.plane, cfg.grasp.source, only,
             cfg.grasp.base_to_tip if hand_poses else None, cfg.reconstruct.masks,
             stage_record(cfg, frame.scene, frame.frame_id, "grasp"))
@@ -56,13 +56,13 @@ def grasp(scene, only, depth_source, masks, hand_poses, preview, batch, out, fra
         if cfg.grasp.source == "repaired":
             why = pipeline.stale_chain(frame.scene, frame.frame_id)
             if why is not None:
-                messages = messages + [f"planned on stale outputs ({why}): run "
-                                       "`sr3d repair-depth` to make them again"]
+                problems = problems + [Problem(f"planned on stale outputs ({why}): run "
+                                               "`sr3d repair-depth` to make them again")]
         if preview:
             write_png(frame.scene.output_path("grasps", frame.frame_id, "_preview.png"),
                       grasp_preview(frame.rgb, load_grasps(frame.scene, frame.frame_id),
                                     frame.camera.K, planner.gripper))
-        return messages
+        return problems
 
     run_frames("grasp", scene, cfg, out, frames, work, batch=batch,
                outputs=lambda source, fid: [source.output_path("grasps", fid, ".json"),

@@ -57,7 +57,7 @@ def report(scenes, output, out, fmt, title, rerun_path):
 def _write_rerun(path: Path, sources, cfg) -> None:
     from sr3d_cli.errors import MissingExtraError
     from sr3d_cli.grasp.gripper import Gripper
-    from sr3d_cli.io.rerun_log import import_rerun, write_recording
+    from sr3d_cli.rerun_log import import_rerun, write_recording
 
     try:
         import_rerun()

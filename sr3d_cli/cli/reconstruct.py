@@ -29,7 +29,7 @@ def reconstruct(scene, backend, masks, library, batch, out, frames, fmt):
       sr3d reconstruct sample_data/scene_0000 --frames 000000
     """
     from sr3d_cli.reconstruct import Reconstructor
-    from sr3d_cli.stages import reconstruct_frame, stage_record, stale
+    from sr3d_cli.stages import FrameState, reconstruct_frame, stage_record, stale
 
     if library and backend is None:
         backend = "library"
@@ -42,12 +42,12 @@ def reconstruct(scene, backend, masks, library, batch, out, frames, fmt):
         raise UsageExit(str(exc)) from None
 
     def work(frame):
-        written, messages = reconstruct_frame(
-            frame, reconstructor, cfg.plane, cfg.reconstruct.masks,
+        written, problems = reconstruct_frame(
+            FrameState(frame, cfg.plane, cfg.reconstruct.masks), reconstructor,
             stage_record(cfg, frame.scene, frame.frame_id, "reconstruct"))
-        if written == 0 and messages:  # instances, and no mesh for any
-            raise FrameFailed("no mesh made (" + "; ".join(messages) + ")")
-        return messages
+        if written == 0 and problems:  # instances, and no mesh for any
+            raise FrameFailed("no mesh made (" + "; ".join(map(str, problems)) + ")")
+        return problems
 
     run_frames("reconstruct", scene, cfg, out, frames, work, batch=batch,
                outputs=lambda source, fid: [source.output_path("meshes", fid, ".json")],

@@ -45,7 +45,7 @@ def repair_depth(scene, npy, ply, preview, masks, redo, batch, out, frames, fmt)
     from sr3d_cli.io.atomic import write_json
     from sr3d_cli.io.provenance import RECORD_KEY
     from sr3d_cli.errors import FrameFailed
-    from sr3d_cli.stages import depth_suffix, load_poses, stage_record
+    from sr3d_cli.stages import depth_suffix, stage_record
 
     cfg = load_config({"io.format": fmt, "reconstruct.masks": masks})
     check_masks(cfg)
@@ -61,11 +61,12 @@ def repair_depth(scene, npy, ply, preview, masks, redo, batch, out, frames, fmt)
     def work(frame):
         source, fid = frame.scene, frame.frame_id
         timings: dict[str, float] = {}
-        messages = pipeline.ensure_upstream(frame, timings, redo=redo,
+        state = pipeline.state(frame)
+        problems = pipeline.ensure_upstream(state, timings, redo=redo,
                                             keep_stale=batch.get("keep_stale", False))
         record = stage_record(cfg, source, fid, "repair")
         start = time.perf_counter()
-        depth, ids = pipeline.repaired_depth(frame)
+        depth, ids = pipeline.repaired_depth(state)
         timings["repair"] = time.perf_counter() - start
         scale = frame.camera.depth_scale
         write_depth(source.output_path("repaired", fid, depth_suffix(source, fid)), depth, scale)
@@ -77,14 +78,14 @@ def repair_depth(scene, npy, ply, preview, masks, redo, batch, out, frames, fmt)
         if preview:
             write_png(source.output_path("repaired", fid, "_preview.png"),
                       previews.preview_image(frame.rgb, frame.depth_m, depth, ids))
-        placed = len(load_poses(source, fid))
+        placed = len(state.pose_document().get("objects", []))
         document = {RECORD_KEY: record, "placed": placed}
         if placed == 0 and (ids > 0).any():  # objects, none placed: the raw depth, unrepaired
-            document["frame_failed"] = "no object placed (" + "; ".join(messages) + ")"
+            document["frame_failed"] = "no object placed (" + "; ".join(map(str, problems)) + ")"
         write_json(source.output_path("repaired", fid, ".json"), document)
         if "frame_failed" in document:
             raise FrameFailed(document["frame_failed"])
-        return messages, timings
+        return problems, timings
 
     def outputs(source, fid):
         paths = [source.output_path("repaired", fid, depth_suffix(source, fid)),

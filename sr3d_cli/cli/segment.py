@@ -36,7 +36,8 @@ def segment(scene, backend, prompt, import_dir, boxes, points, preview, batch, o
     from sr3d_cli.io.atomic import write_png
     from sr3d_cli.io.preview import instances_preview
     from sr3d_cli.segment import Segmenter
-    from sr3d_cli.stages import stage_record, stale, write_instances
+    from sr3d_cli.errors import Problem
+    from sr3d_cli.stages import FrameState, segment_frame, stage_record, stale
 
     if import_dir and backend is None:
         backend = "import"
@@ -49,13 +50,12 @@ def segment(scene, backend, prompt, import_dir, boxes, points, preview, batch, o
         raise UsageExit(str(exc)) from None
 
     def work(frame):
-        instances = segmenter(frame.frame_id, frame.rgb, frame.depth_m, frame.camera.K)
-        write_instances(frame.scene, frame.frame_id, instances, cfg.segment.backend,
-                        stage_record(cfg, frame.scene, frame.frame_id, "segment"))
+        instances = segment_frame(FrameState(frame, cfg.plane), segmenter, cfg.segment.backend,
+                                  stage_record(cfg, frame.scene, frame.frame_id, "segment"))
         if preview:
             write_png(frame.scene.output_path("masks", frame.frame_id, "_preview.png"),
                       instances_preview(frame.rgb, instances.ids, instances.objects))
-        return [] if instances.objects else ["no transparent object found"]
+        return [] if instances.objects else [Problem("no transparent object found")]
 
     run_frames("segment", scene, cfg, out, frames, work, batch=batch,
                outputs=lambda source, fid: [source.output_path("masks", fid),

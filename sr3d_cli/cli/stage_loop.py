@@ -32,7 +32,7 @@ from tqdm import tqdm
 from sr3d_cli.cli.batch import check_writable, iter_frames, open_scenes
 from sr3d_cli.cli.report import Report
 from sr3d_cli.config import Config
-from sr3d_cli.errors import Sr3dError
+from sr3d_cli.errors import Problem, Sr3dError
 from sr3d_cli.io.scene import Frame, SceneSource
 
 log = logging.getLogger("sr3d")
@@ -52,8 +52,8 @@ def _stop_worker(signum, frame):
 
 
 def _run_one(index: int):
-    """(index, messages, stage seconds, failure message or None, traceback or None, seconds)
-    of one frame. ``work`` returns messages or (messages, {stage: seconds})."""
+    """(index, problems, stage seconds, failure message or None, traceback or None, seconds)
+    of one frame. ``work`` returns problems or (problems, {stage: seconds})."""
     source, frame_id = _JOB["pairs"][index]
     start = time.perf_counter()
     try:
@@ -62,8 +62,8 @@ def _run_one(index: int):
         reason = str(exc) if isinstance(exc, Sr3dError) else \
             f"unexpected {type(exc).__name__}: {exc}"
         return index, None, {}, reason, traceback.format_exc(), time.perf_counter() - start
-    messages, stages = result if isinstance(result, tuple) else (result, {})
-    return index, messages, stages, None, None, time.perf_counter() - start
+    problems, stages = result if isinstance(result, tuple) else (result, {})
+    return index, problems, stages, None, None, time.perf_counter() - start
 
 
 def record_run(source: SceneSource, frame_id: str, command: str, seconds: float,
@@ -173,13 +173,14 @@ def _finished(source: SceneSource, frame_id: str, paths: list[Path],
 
 
 def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str | None,
-               work: Callable[[Frame], list[str] | tuple[list[str], dict]], *,
+               work: Callable[[Frame], list[Problem] | tuple[list[Problem], dict]], *,
                batch: dict | None = None,
                outputs: Callable[[SceneSource, str], list[Path]] | None = None,
                after: Callable[[list[SceneSource]], None] | None = None,
                stale: Callable[[SceneSource, str], str | None] | None = None) -> None:
-    """Load each selected frame and call ``work(frame)``, which returns object-level messages
-    (printed as warnings), or (messages, {stage: seconds}); or raises (that frame fails;
+    """Load each selected frame and call ``work(frame)``, which returns the problems that do
+    not fail it (:class:`~sr3d_cli.errors.Problem`, printed as warnings), or (problems,
+    {stage: seconds}); or raises (that frame fails;
     :class:`~sr3d_cli.errors.FrameFailed` when it wrote outputs that say why). Each frame's
     outcome and time go to its run log (:func:`record_run`). ``batch``: the values of
     :func:`batch_options`; ``outputs(scene, frame_id)``: the files that mark a frame done;
@@ -215,7 +216,7 @@ def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str 
             results = pool.imap_unordered(_run_one, range(len(pairs)))
         else:
             results = map(_run_one, range(len(pairs)))
-        for index, messages, stages, failure, details, seconds in results:
+        for index, problems, stages, failure, details, seconds in results:
             source, frame_id = pairs[index]
             key = source.frame_key(frame_id)
             bar.update()
@@ -224,8 +225,8 @@ def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str 
                 record_run(source, frame_id, name, seconds, stages, report.failures[-1])
                 continue
             record_run(source, frame_id, name, seconds, stages)
-            for message in messages:
-                log.warning("warning: %s %s", key, message)
+            for problem in problems:
+                log.warning("warning: %s %s", key, problem)
             report.ok()
         if pool is not None:
             pool.close()

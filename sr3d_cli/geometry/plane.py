@@ -7,10 +7,14 @@ towards the camera side (``d > 0``), so ``height(p) = n . p + d`` is positive ab
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from sr3d_cli.geometry.camera import depth_to_points, pixel_rays, project
+
+if TYPE_CHECKING:
+    from sr3d_cli.config import PlaneConfig
 
 
 @dataclass(frozen=True)
@@ -146,3 +150,13 @@ def fit_support_plane(depth_m: np.ndarray, K: np.ndarray, *, threshold: float = 
         raise ValueError(f"no support plane: the best plane holds {100 * inliers.mean():.0f}% "
                          f"of the valid depth (need {100 * min_share:.0f}%)")
     return plane
+
+
+def support_plane(depth_m: np.ndarray, K: np.ndarray, cfg: "PlaneConfig",
+                  exclude: np.ndarray | None = None) -> Plane:
+    """The table with the ``plane`` config's settings (the one place they are passed on).
+
+    depth_m : (H, W) metres, 0 = no reading; K : (3, 3); exclude : (H, W) bool pixels left out.
+    Raises ValueError when there is none (:func:`fit_support_plane`)."""
+    return fit_support_plane(depth_m, K, threshold=cfg.threshold, iterations=cfg.iterations,
+                             min_share=cfg.min_share, exclude=exclude)

@@ -22,6 +22,16 @@ def place_points(points_obj: np.ndarray, T_cam_obj: np.ndarray, scale: float) ->
     return apply_T(T_cam_obj, scale * np.asarray(points_obj, dtype=np.float64))
 
 
+def unit(v: np.ndarray) -> np.ndarray:
+    """Unit vectors along the last axis of ``v (..., n)``, same dtype; a zero vector stays
+    zero. One vector's norm is NumPy's vector norm (a dot product), a stack's a sum along the
+    last axis: the two round differently in the last bit, and the pose and shape searches are
+    set on the first."""
+    v = np.asarray(v)
+    norm = np.linalg.norm(v) if v.ndim == 1 else np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(norm > 0, norm, 1)
+
+
 def rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotation matrix of ``angle`` radians about ``axis`` (Rodrigues)."""
     axis = np.asarray(axis, dtype=np.float64)

@@ -41,6 +41,7 @@ import numpy as np
 from sr3d_cli.geometry.camera import depth_normals, depth_to_points, project
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points, rotation_about
+from sr3d_cli.geometry.transforms import unit as _unit
 from sr3d_cli.grasp import GraspSet
 from sr3d_cli.grasp.gripper import Gripper, count_inside, to_local
 
@@ -92,11 +93,6 @@ def in_view(cloud: Cloud, K: np.ndarray, shape: tuple[int, int]) -> Cloud:
     front = cloud.points[:, 2] > 0
     u, v = project(np.where(front[:, None], cloud.points, [0.0, 0.0, 1.0]), K).T
     return cloud.select(front & (u >= 0) & (u <= shape[1] - 1) & (v >= 0) & (v <= shape[0] - 1))
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 0, n, 1)
 
 
 def rotation_distance(Ra: np.ndarray, Rb: np.ndarray) -> np.ndarray:

@@ -11,15 +11,11 @@ import numpy as np
 import trimesh
 
 from sr3d_cli.errors import Sr3dError
+from sr3d_cli.geometry.silhouette import mask_iou
 from sr3d_cli.geometry.transforms import is_rigid, place_points
 from sr3d_cli.io import images
 from sr3d_cli.io.scene import SceneSource
 from sr3d_cli.render import RenderMesh, Renderer
-
-
-def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
-    union = np.logical_or(a, b).sum()
-    return float(np.logical_and(a, b).sum() / union) if union else 1.0
 
 
 def check_frame(source: SceneSource, frame_id: str, renderer: Renderer | None = None,
@@ -74,7 +70,7 @@ def check_frame(source: SceneSource, frame_id: str, renderer: Renderer | None = 
         # only where the object is really in front (occluders are not listed in gt/objects)
         visible = (out.depth > 0) & (out.depth <= np.where(gt > 0, gt, np.inf) + 0.005)
         for m in meshes:
-            ious[m.id] = mask_iou(mask == m.id, (out.ids == m.id) & visible)
+            ious[m.id] = mask_iou(mask == m.id, (out.ids == m.id) & visible, empty=1.0)
             if ious[m.id] < min_iou:
                 problems.append(f"{key}: object {m.id}: pose projects onto its mask with IoU "
                                 f"{ious[m.id]:.3f} < {min_iou}")

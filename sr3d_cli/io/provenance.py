@@ -38,16 +38,19 @@ NOT_RECORDED = {"reconstruct.masks"}  # recorded as the mask file it names, amon
 RECORD_KEY = "made_from"
 
 
+def digest(data: bytes) -> str:
+    """``sha256:HEX`` (16 hex digits) of a file's bytes: its fingerprint."""
+    return f"sha256:{hashlib.sha256(data).hexdigest()[:16]}"
+
+
 def fingerprint(path: Path | None) -> str:
-    """``sha256:HEX`` (16 hex digits) of a file's bytes; ``"none"`` where it is absent."""
+    """:func:`digest` of a file; ``"none"`` where it is absent."""
     if path is None:
         return "none"
-    path = Path(path)
     try:
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+        return digest(Path(path).read_bytes())
     except OSError:
         return "none"
-    return f"sha256:{digest}"
 
 
 def config_keys(cfg: Config, stage: str) -> dict:

@@ -20,9 +20,9 @@ from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.geometry.transforms import apply_T, place_points
 from sr3d_cli.reconstruct.bowls import bowl_instead
 from sr3d_cli.reconstruct.handles import handle_slab, split_handle
-from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, RevolutionFit, carved,
-                                                 fit_revolution, off_table_readings, raw_support,
-                                                 smoothed, straight_walls)
+from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, RevolutionFit, carved, fit_revolution,
+                                           off_table_readings, raw_support, smoothed,
+                                           straight_walls)
 
 BASE_SHARE = 0.15  # of the height: the profile's lowest part, whose widest ring is the base
 MIN_AXIS_PX = 10  # pixels the projected axis must span for its upper half to be told apart

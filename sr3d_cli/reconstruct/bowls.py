@@ -18,9 +18,8 @@ from collections.abc import Callable
 import numpy as np
 
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, RevolutionFit,
-                                                 _fit, _Model, _result,
-                                                 off_table_readings, raw_support)
+from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, RevolutionFit, _fit,
+                                           _Model, _result, off_table_readings, raw_support)
 
 NARROW_TOP = 0.7  # a fit whose top radius is below this share of its widest narrows upwards
 BOWL_VOTE = 2.0  # times as many readings on the opened bowl as on the dome to take it

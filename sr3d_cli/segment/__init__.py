@@ -17,7 +17,7 @@ import numpy as np
 from sr3d_cli.config import PlaneConfig, SegmentConfig
 from sr3d_cli.errors import InputError
 from sr3d_cli.geometry.camera import Camera
-from sr3d_cli.geometry.plane import Plane, fit_support_plane
+from sr3d_cli.geometry.plane import support_plane
 from sr3d_cli.io import images
 
 log = logging.getLogger("sr3d")
@@ -56,13 +56,6 @@ def from_masks(masks: list[np.ndarray], scores: list[float], shape: tuple[int, i
         out.objects.append({"id": k, "label": label, "score": round(float(score), 4),
                             "bbox": bbox(mask)})
     return out
-
-
-def support_plane(depth_m: np.ndarray, K: np.ndarray, cfg: PlaneConfig,
-                  exclude: np.ndarray | None = None) -> Plane:
-    """The table, fitted once per frame by every stage with the same settings."""
-    return fit_support_plane(depth_m, K, threshold=cfg.threshold, iterations=cfg.iterations,
-                             min_share=cfg.min_share, exclude=exclude)
 
 
 WORK_WIDTH = 640  # pixels: a frame is segmented reduced by the whole factor floor(W / 640) (1280

@@ -22,7 +22,7 @@ The steps:
    pixels apart, whose gap the closing filled), or between groups of its readings that stand
    apart on the table (one object behind another), kept split only where solids of revolution
    on the table explain the parts clearly better than the whole (the revolution fit of
-   :mod:`sr3d_cli.reconstruct.revolution_fit`);
+   :mod:`sr3d_cli.shape.revolution_fit`);
 7. instances that are too small or too large to be an object on the table dropped, those
    whose colour replaces the table's (an opaque object: glass shows the table through itself,
    :func:`table_colour_departure`) and those with no outline in colour at all (a sensor's
@@ -782,16 +782,16 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     levels deep (``whole``: the region's fit, given with each part of a region already cut).
     Where one part stands in front of the other (:func:`~sr3d_cli.geometry.occlusion.in_front`),
     the part behind is fitted with the front part's pixels as hidden, so that it may reach down
-    behind it (:func:`~sr3d_cli.reconstruct.revolution_fit.fit_revolution`'s ``occluders``),
+    behind it (:func:`~sr3d_cli.shape.revolution_fit.fit_revolution`'s ``occluders``),
     if that fit lies behind the front part's
-    (:func:`~sr3d_cli.reconstruct.revolution_fit.stands_behind`); alone otherwise. Fitted
+    (:func:`~sr3d_cli.shape.revolution_fit.stands_behind`); alone otherwise. Fitted
     alone, a glass behind a glass stands where the front one's outline crosses it, and its
     readings miss it (seed 2700 frame 22: 24 of them on it, 56 when placed 4% nearer).
     """
-    from sr3d_cli.reconstruct.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS,
-                                                     DEPTH_SAMPLES, evenly, fit_revolution,
-                                                     fit_silhouette, off_table_readings,
-                                                     raw_support, stands_behind, above_top)
+    from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, DEPTH_SAMPLES,
+                                               evenly, fit_revolution, fit_silhouette,
+                                               off_table_readings, raw_support, stands_behind,
+                                               above_top)
 
     if rounds < 1:
         return [region]

@@ -9,6 +9,7 @@ import numpy as np
 
 from sr3d_cli.geometry.camera import depth_to_points
 from sr3d_cli.geometry.transforms import apply_T
+from sr3d_cli.geometry.transforms import unit as _unit
 
 
 def smooth_noise(rng: np.random.Generator, shape: tuple[int, int], cell: float) -> np.ndarray:
@@ -49,10 +50,6 @@ class TableTexture:
         mx = pix[..., 0].astype(np.float32)
         my = pix[..., 1].astype(np.float32)
         return cv2.remap(self.image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
 
 
 def _view_and_half(pts_cam: np.ndarray, light_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,7 +1,12 @@
-"""Fast mesh silhouettes for pose search: projected triangles filled with OpenCV.
+"""The silhouette rasteriser of mesh fits and pose search, and the one mask IoU.
 
-Only the outline matters while searching for a pose, so no depth test is needed: every triangle
-in front of the camera is filled. Full renders (depth, ids, normals) use :mod:`sr3d_cli.render`.
+Projected triangles are filled with OpenCV at a quarter-pixel, in a window of the image when
+asked: only the outline matters while a shape or a pose is searched, so no depth test is needed
+(every triangle in front of the camera is filled), and hundreds of candidates are drawn per
+object. Full renders (depth, ids and normals for the repaired depth) use :mod:`sr3d_cli.render`,
+whose z-buffer takes a pixel when a triangle covers its centre, as OpenGL does; this fill also
+takes a pixel its outline touches, and the fits' constants are tuned to that (see
+:func:`sr3d_cli.geometry.revolution.silhouette`), so the two stay apart.
 """
 
 from __future__ import annotations
@@ -94,31 +99,12 @@ def surface_depth(uv: np.ndarray, pts: np.ndarray, faces: np.ndarray, K: np.ndar
     return z
 
 
-def crop_square(mask: np.ndarray, size: int) -> np.ndarray:
-    """The mask's bounding box, centred in a ``size`` x ``size`` float32 image (aspect kept)."""
-    ys, xs = np.nonzero(mask)
-    if len(xs) == 0:
-        return np.zeros((size, size), np.float32)
-    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-    crop = mask[y0:y1, x0:x1].astype(np.float32)
-    side = max(y1 - y0, x1 - x0)
-    canvas = np.zeros((side, side), np.float32)
-    oy, ox = (side - (y1 - y0)) // 2, (side - (x1 - x0)) // 2
-    canvas[oy:oy + y1 - y0, ox:ox + x1 - x0] = crop
-    return cv2.resize(canvas, (size, size), interpolation=cv2.INTER_AREA)
-
-
-def aspect(mask: np.ndarray) -> float:
-    ys, xs = np.nonzero(mask)
-    if len(xs) == 0:
-        return 1.0
-    return float((np.ptp(xs) + 1) / (np.ptp(ys) + 1))
-
-
-def silhouette_iou(a: np.ndarray, b: np.ndarray, ignore: np.ndarray | None = None) -> float:
-    """Intersection over union of two boolean masks (0 when both are empty), over the pixels
-    outside ``ignore`` when given (where another object may hide either)."""
+def mask_iou(a: np.ndarray, b: np.ndarray, ignore: np.ndarray | None = None,
+             empty: float = 0.0) -> float:
+    """Intersection over union of two boolean masks ``(H, W)``, over the pixels outside
+    ``ignore (H, W) bool`` when given (where another object may hide either); ``empty`` when
+    both are empty there (0: nothing drawn matches nothing seen; 1: two absent objects agree)."""
     if ignore is not None:
         a, b = a & ~ignore, b & ~ignore
     union = np.count_nonzero(a | b)
-    return np.count_nonzero(a & b) / union if union else 0.0
+    return np.count_nonzero(a & b) / union if union else float(empty)

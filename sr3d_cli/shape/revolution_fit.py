@@ -23,11 +23,11 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from sr3d_cli.align.silhouette import project_mesh, silhouette_iou, surface_depth
 from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import hull_sides, revolve, silhouette
-from sr3d_cli.geometry.transforms import make_T, perpendiculars, rotation_about
+from sr3d_cli.geometry.silhouette import mask_iou, project_mesh, surface_depth
+from sr3d_cli.geometry.transforms import make_T, perpendiculars, rotation_about, unit
 
 DEPTH_BAND = 0.01  # metres: a raw reading this close to a model's front surface lies on it
 DEPTH_MIN_POINTS = 30  # fewest readings on a surface that count as evidence
@@ -84,10 +84,6 @@ def _ray(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
     return np.array([(uv[0] - K[0, 2]) / K[0, 0], (uv[1] - K[1, 2]) / K[1, 1], 1.0])
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
-
-
 class _Frame:
     """An image window around the mask, rotated so that the projected axis points up. Pixels
     ``occluders`` (H, W) bool, when given, are where objects in front may hide the one fitted:
@@ -118,7 +114,7 @@ class _Frame:
               occluders: np.ndarray | None = None) -> "_Frame":
         """The window whose vertical is ``model``'s projected axis, centred between its ends."""
         c0, c1 = project(np.stack([model.base, model.base + model.height * model.axis]), K)
-        up = _unit(c1 - c0) if np.linalg.norm(c1 - c0) > 1e-6 else np.array([0.0, -1.0])
+        up = unit(c1 - c0) if np.linalg.norm(c1 - c0) > 1e-6 else np.array([0.0, -1.0])
         return cls(mask, (c0 + c1) / 2, up, pad=8, occluders=occluders)
 
     def seen(self, ren: np.ndarray) -> np.ndarray:
@@ -128,7 +124,7 @@ class _Frame:
 
     def iou(self, ren: np.ndarray) -> float:
         """Silhouette IoU of ``ren`` against the mask, over the pixels no occluder covers."""
-        return silhouette_iou(self.obs, ren, self.occluders)
+        return mask_iou(self.obs, ren, self.occluders)
 
     def warp(self, window: np.ndarray) -> np.ndarray:
         return cv2.warpAffine(window.astype(np.uint8), self.M, (self.size, self.size),
@@ -211,7 +207,7 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             return a, b
         a0, b0 = shift()
         if resting == "standing":
-            away = _unit(plane.project_direction(model.base))
+            away = unit(plane.project_direction(model.base))
             side = np.cross(n, away)
             # top: the height; bottom: the base moves towards / away from the camera
             _, bt = shift(delta_top=eps * model.axis)
@@ -225,7 +221,7 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             model.height = max(model.height + step[0], 1e-3)
         else:
             # lying: move each end along the axis, the axis sideways in the plane
-            side = _unit(np.cross(n, model.axis))
+            side = unit(np.cross(n, model.axis))
             _, bt = shift(delta_top=eps * model.axis)
             dt = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
             a_b, _ = shift(delta_base=-eps * model.axis)
@@ -356,7 +352,7 @@ def _rest_on_hull(model: _Model, plane: Plane) -> None:
     """Tilt a lying model's axis about its middle and set its height so that it rests on the
     table as :func:`_resting_tilt` says."""
     n = plane.normal
-    flat = _unit(plane.project_direction(model.axis))
+    flat = unit(plane.project_direction(model.axis))
     theta, h0 = _resting_tilt(np.linspace(0, model.height, len(model.radii)), model.radii)
     mid = model.base + 0.5 * model.height * model.axis
     model.axis = np.cos(theta) * flat + np.sin(theta) * n
@@ -380,7 +376,7 @@ def _init_standing(mask, K, plane, levels) -> _Model | None:
         return None
     n = plane.normal
     up = project(np.stack([p, p + 0.05 * n]), K)
-    up = _unit(up[1] - up[0])
+    up = unit(up[1] - up[0])
     ys, xs = np.nonzero(mask)
     along = xs * up[0] + ys * up[1]
     low = along <= along.min() + 1.5
@@ -391,7 +387,7 @@ def _init_standing(mask, K, plane, levels) -> _Model | None:
     z = front[2]
     width_px = mask.sum() / max(np.ptp(along), 1.0)
     r = 0.5 * width_px * z / K[0, 0]
-    base = front + r * _unit(plane.project_direction(front))
+    base = front + r * unit(plane.project_direction(front))
     top = np.array([xs[along >= along.max() - 1.5].mean(), ys[along >= along.max() - 1.5].mean()])
     s = np.linspace(0.005, 1.5, 300)
     px = project(base[None] + s[:, None] * n, K)
@@ -417,7 +413,7 @@ def _init_lying(mask, K, plane, levels, across_major: bool = False) -> _Model | 
     e2 = raised.intersect(_ray(centre + along.max() * major, K))
     if not (np.all(np.isfinite(e1)) and np.all(np.isfinite(e2))):
         return None
-    axis = _unit(plane.project_direction(e2 - e1))
+    axis = unit(plane.project_direction(e2 - e1))
     length = float(np.linalg.norm(e2 - e1))
     return _Model(e1, axis, max(length, 1e-3), np.full(levels, r))
 
@@ -588,8 +584,8 @@ def carved(fit: RevolutionFit, mask: np.ndarray, depth: np.ndarray, K: np.ndarra
     profile = fit.profile.copy()
     profile[1:-1, 0] = np.where(inside, thin, radii)
     thinned = replace(fit, profile=profile, solid_below=float(z[inside].max()))
-    iou = silhouette_iou(mask, fit_silhouette(thinned, K, mask.shape))
-    if iou < silhouette_iou(mask, fit_silhouette(fit, K, mask.shape)) - loss:
+    iou = mask_iou(mask, fit_silhouette(thinned, K, mask.shape))
+    if iou < mask_iou(mask, fit_silhouette(fit, K, mask.shape)) - loss:
         return fit
     return replace(thinned, iou=iou)
 
@@ -683,7 +679,7 @@ def axial_view_angle(mask: np.ndarray, K: np.ndarray, plane: Plane) -> float:
     the camera looks down a standing object's axis and its outline says almost nothing about
     its height or profile (a bottle, a jar and a glass all draw a disc)."""
     centre, _, _ = _principal(mask)
-    return float(np.degrees(np.arccos(np.clip(-_unit(_ray(centre, K)) @ plane.normal, -1, 1))))
+    return float(np.degrees(np.arccos(np.clip(-unit(_ray(centre, K)) @ plane.normal, -1, 1))))
 
 
 def _envelope(z: np.ndarray, r: np.ndarray, levels: np.ndarray, band: float,
@@ -719,7 +715,7 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
         return None
     base = mid - 0.5 * height * n
     widest = np.sqrt(mask.sum() / np.pi) * mid[2] / K[0, 0]
-    e1 = _unit(plane.project_direction(np.array([1.0, 0, 0])))
+    e1 = unit(plane.project_direction(np.array([1.0, 0, 0])))
     e2 = np.cross(n, e1)
     zk = np.linspace(0.0, height, levels)
     area = float(mask.sum())
@@ -743,8 +739,7 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
                              / 0.005 for e in (e1, e2)])
         step = np.linalg.lstsq(J, gap, rcond=None)[0]
         base = base + np.clip(step, -0.5 * widest, 0.5 * widest) @ np.stack([e1, e2])
-    inter = (sil & mask).sum()
-    iou = float(inter / ((sil | mask).sum() or 1))
+    iou = mask_iou(sil, mask)
     # the readings' top lies above the rim by about twice their noise (glass readings scatter
     # a few mm along the ray). Looked straight down, the outline hardly moves with the
     # height: its ends are kept only within ``band`` of the readings' height.
