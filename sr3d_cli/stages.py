@@ -392,7 +392,7 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
 def _plan_frame(frame: Frame, planner, plane_cfg, depth_source: str, only: int | None,
                 ids: np.ndarray):
     """(grasps, object messages) of a frame with objects ``ids`` (H, W) int32."""
-    from sr3d_cli.grasp.planner import Cloud, depth_cloud, in_view, mesh_cloud
+    from sr3d_cli.grasp.planner import Cloud, depth_cloud, in_view, mesh_cloud, observed_cloud
 
     source, fid, K = frame.scene, frame.frame_id, frame.camera.K
     cfg = planner.cfg
@@ -407,8 +407,9 @@ def _plan_frame(frame: Frame, planner, plane_cfg, depth_source: str, only: int |
             raise ValueError(why)
     scene = depth_cloud(depth, K, ids, cfg.stride)
     targets = {int(k): scene.select(scene.labels == k) for k in np.unique(ids) if k > 0}
-    surfaces, fallbacks, axes = {}, {}, {}
+    surfaces, fallbacks, axes, observed = {}, {}, {}, None
     if depth_source == "repaired":
+        observed = observed_cloud(frame.depth_m, K, ids)
         placed, opened = {}, {}
         for obj in poses.get("objects", []):
             k = int(obj["id"])
@@ -430,7 +431,7 @@ def _plan_frame(frame: Frame, planner, plane_cfg, depth_source: str, only: int |
         scene = Cloud.concat([scene] + [c for c, _ in placed.values()])
     if only is not None:
         targets = {only: targets[only]}
-    return planner.plan(scene, targets, plane, surfaces, fallbacks, axes)
+    return planner.plan(scene, targets, plane, surfaces, fallbacks, axes, observed)
 
 
 def load_grasps(source: SceneSource, frame_id: str):

@@ -29,7 +29,11 @@ least friction on the model, and a message says when even those need more than `
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
-the depth sees.
+the depth sees. A placed model can be wrong (a handle or a spout it lacks, a flat bottle fitted
+round, a fit too thin or shifted); the sensor's own readings on the objects, which the repaired
+depth replaces with the models, still show where surfaces are: a grasp whose fingers hold
+readings no model accounts for is contradicted by the observation and dropped
+(:meth:`Planner._observation_agrees`).
 """
 
 from __future__ import annotations
@@ -71,6 +75,51 @@ def depth_cloud(depth_m: np.ndarray, K: np.ndarray, ids: np.ndarray, stride: int
     pts, lab = pts[sl], ids[sl]
     ok = pts[..., 2] > 0
     return Cloud(pts[ok], nrm[ok], lab[ok].astype(np.int64))
+
+
+def observed_cloud(depth_m: np.ndarray, K: np.ndarray, ids: np.ndarray,
+                   stride: int = 1) -> Cloud:
+    """The sensor's valid readings (depth ``(H, W)`` metres, 0 or nan: none) on the objects'
+    masks (``ids (H, W)`` int, 0 = none), every ``stride``-th pixel, back-projected, labelled by
+    ``ids``; normals unknown (0). These are the readings a repaired depth replaces with the
+    placed models: each is a surface, whatever the model says (a see-through reading: the
+    surface behind). Each reading's depth is the median of the readings on its surface (within
+    :data:`SAME_SURFACE` of it) in the window :data:`DENOISE_RADIUS` pixels around it: a
+    glass's front-surface returns scatter by several millimetres along their rays, and one
+    alone would put a surface inside a finger that the median of its neighbours puts on the
+    object (see :meth:`Planner.plan`)."""
+    depth = np.where(np.isfinite(depth_m), depth_m, 0.0).astype(np.float64)
+    keep = np.zeros(depth.shape, bool)
+    keep[::stride, ::stride] = True
+    v, u = np.nonzero(keep & (depth > 0) & (ids > 0))
+    r = DENOISE_RADIUS
+    padded = np.pad(depth, r)
+    z = depth[v, u]
+    around = np.stack([padded[v + r + dv, u + r + du] for dv in range(-r, r + 1)
+                       for du in range(-r, r + 1)], axis=1)          # (n, (2r + 1)^2)
+    same = (around > 0) & (np.abs(around - z[:, None]) < SAME_SURFACE)  # the reading is one
+    ranked = np.sort(np.where(same, around, np.inf), axis=1)
+    count, rows = same.sum(axis=1), np.arange(len(z))
+    z = (ranked[rows, (count - 1) // 2] + ranked[rows, count // 2]) / 2  # their median
+    pts = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=1)
+    return Cloud(pts, np.zeros_like(pts), ids[v, u].astype(np.int64))
+
+
+def unexplained(observed: Cloud, models: list["Sections"]) -> Cloud:
+    """The readings of ``observed`` that no placed model (``models``, their outer outlines)
+    accounts for: every point of the reading's ray within :data:`RAY_NOISE` of it (a depth
+    reading errs along its ray, a glass's front-surface return by several millimetres) lies
+    farther than :data:`EXPLAINED` outside each model. A reading inside a model's outline may
+    be its surface or one seen through it; one outside every model is a surface the models
+    lack (a handle, a spout, a flat bottle's edge, an object wider than its fit)."""
+    points = observed.points
+    rays = _unit(points)
+    keep = np.ones(len(points), bool)
+    for step in np.linspace(-RAY_NOISE, RAY_NOISE, RAY_STEPS):
+        for model in models:
+            left = np.flatnonzero(keep)
+            keep[left] = model.outside(points[left] + step * rays[left], EXPLAINED)
+    return observed.select(keep)
 
 
 def mesh_cloud(mesh, T_cam_obj: np.ndarray, scale: float, label: int, count: int,
@@ -136,7 +185,11 @@ SURE = 1e-5  # m, kept from a box's faces where a test on other coordinates must
 CHUNK = 96  # frames tried at once (Planner._try_frames): 48 is ~7% slower, 192 no faster
 MIN_SECTION = 3  # target points under the pads that make a section (fewer: a stray sample)
 MAX_CONTACT_ANGLE = np.radians(89.9)  # a contact's angle is capped here: tan stays finite
-OBSERVED_NOISE = 0.0015  # m, a sensor reading may lie this far off its surface
+EXPLAINED = 0.003  # m, a reading this near a placed model's outline may be its surface
+RAY_NOISE = 0.004  # m, a reading made a median (observed_cloud) errs up to this along its ray
+RAY_STEPS = 5  # points tried along it, under EXPLAINED from the next (2 mm apart)
+SAME_SURFACE = 0.012  # m, readings this near in depth lie on one surface: 3 sd of a glass return
+DENOISE_RADIUS = 2  # px, the window (5 x 5) whose readings on one surface give its median
 
 
 RUN_TOLERANCE = 0.001  # m: a section this near a run's line continues it (Sections.margin)
@@ -183,6 +236,15 @@ class Sections:
 
     def height(self, points: np.ndarray) -> np.ndarray:
         return (points - self.origin) @ self.along
+
+    def outside(self, points: np.ndarray, tolerance: float) -> np.ndarray:
+        """Which ``points (n, 3)`` lie farther than ``tolerance`` (m) outside the model: past
+        its outer radius at their height, or past either end. (n,) bool."""
+        h = self.height(points)
+        z = self.h0 + self.step * np.arange(len(self.radius))
+        r = np.linalg.norm(points - self.origin - np.outer(h, self.along), axis=1)
+        beyond = (h < z[0] - tolerance) | (h > z[-1] + tolerance)
+        return beyond | (r > np.interp(h, z, self.radius) + tolerance)
 
     def margin(self, h: np.ndarray, below: np.ndarray, above: np.ndarray,
                end: float, drop: float = 0.0) -> np.ndarray:
@@ -233,17 +295,24 @@ class Planner:
     def plan(self, scene: Cloud, targets: dict[int, Cloud], plane: Plane,
              surfaces: dict[int, np.ndarray] | None = None,
              fallbacks: dict[int, tuple[Cloud, Cloud, np.ndarray]] | None = None,
-             axes: dict[int, np.ndarray] | None = None) -> tuple[GraspSet, list[str]]:
+             axes: dict[int, np.ndarray] | None = None,
+             observed: Cloud | None = None) -> tuple[GraspSet, list[str]]:
         """Grasps for every object in ``targets`` (contact points), checked against ``scene``
         (every point that can collide, targets included). ``surfaces``: the placed mesh's
         triangles (m, 3, 3) of objects that have one; their best grasps are scored again with
         the jaws closed exactly on it (:meth:`_rescore`). ``fallbacks``: (scene, target,
         triangles) to plan an object on where nothing on its own holds (a lying vessel opened
         at its wider end). ``axes``: a placed mesh's height axis (camera frame),
-        along which its fitted height may be off (default: the table normal). Returns (grasps,
-        object messages)."""
+        along which its fitted height may be off (default: the table normal). ``observed``:
+        the sensor's readings where ``scene`` shows something else (:func:`observed_cloud`:
+        the placed models rendered over the objects' masks); a grasp whose gripper holds
+        some is contradicted by them (:meth:`_observation_agrees`). Returns (grasps, object
+        messages)."""
         sets, messages = [], []
         surfaces, fallbacks, axes = surfaces or {}, fallbacks or {}, axes or {}
+        if observed is not None:
+            observed = unexplained(observed, [Sections.of(t, axes.get(k, plane.normal))
+                                              for k, t in surfaces.items()])
         planners = [self] + ([self.tightened()] if self.cfg.tight_margins > 0 else [])
         if self.cfg.fallback_friction > self.cfg.friction:
             planners.append(self.relaxed())
@@ -261,7 +330,8 @@ class Planner:
             for full, short in ladder:
                 planner = short if len(found) else full
                 for target, cloud, triangles in tries:
-                    grasps, reason, mu = planner._object(k, target, cloud, plane, triangles, axis)
+                    grasps, reason, mu = planner._object(k, target, cloud, plane, triangles, axis,
+                                                         observed)
                     why = why or reason
                     if triangles is None and planner.cfg.friction > self.cfg.friction:
                         mu = planner.cfg.friction  # sampled contacts held only at this one
@@ -306,8 +376,8 @@ class Planner:
     # -- one object -----------------------------------------------------------------------------
 
     def _object(self, k: int, target: Cloud, scene: Cloud, plane: Plane,
-                surface: np.ndarray | None = None, axis: np.ndarray | None = None
-                ) -> tuple[GraspSet, str, float]:
+                surface: np.ndarray | None = None, axis: np.ndarray | None = None,
+                observed: Cloud | None = None) -> tuple[GraspSet, str, float]:
         """Grasps for object ``k``, a reason where there are none, and the friction the best
         one's exact contacts on the placed model ``surface`` need (0 without one: its
         sampled contacts held)."""
@@ -328,6 +398,8 @@ class Planner:
 
         scene = scene.select(collides(scene.points))
         solid = collides(target.points)  # the target's points among them (see _try_frames)
+        if observed is not None:
+            observed = observed.select(collides(observed.points))
         # an object with few holdable places (a goblet's stem, a wide beaker's rim) may get no
         # seed on them: draw other seeds, up to ``redraws`` times, while nothing holds (with a
         # placed mesh: while the best grasp's exact contacts do not hold)
@@ -340,7 +412,8 @@ class Planner:
             R, c, span = self._frames(target, plane, rng)
             pairs += len(R)
             found = [self._try_frames(k, R[s:s + CHUNK], c[s:s + CHUNK], span[s:s + CHUNK],
-                                      target, scene, plane, top, end, sections, solid)
+                                      target, scene, plane, top, end, sections, solid,
+                                      observed)
                      for s in range(0, len(R), CHUNK)]
             grasps = GraspSet.concat([grasps] + [f for f in found if f is not None])
             if len(grasps) == 0:
@@ -691,16 +764,23 @@ class Planner:
 
     def _observation_agrees(self, cand: "_Candidates", observed: "_LocalPoints",
                             depth: float) -> np.ndarray:
-        """Which candidates no sensor reading contradicts: their fingers and palm, each shrunk
-        by :data:`OBSERVED_NOISE` (a reading is a surface, give or take its noise), hold
-        fewer than ``collision_points`` of the observed points. A reading in a finger proves
-        a surface where the placed model has none (the object wider than its model, or
-        elsewhere; a handle or a spout the model lacks), and on the true object that finger
-        would close through it: (f,) bool."""
+        """Which candidates no sensor reading contradicts: each finger, inflated by
+        ``collision_margin``, and the palm hold fewer than ``collision_points`` of the
+        ``observed`` readings no placed model accounts for (:func:`unexplained`). Such a
+        reading is a surface the model lacks (the object wider than its model, or elsewhere;
+        a handle, a spout): a finger on it would close through it on the true object, and one
+        just beside a finger (the pads pass ``width_margin`` from the model) tells of that
+        surface reaching into it, as a glass's readings sample its surface a few pixels in
+        ten. Only readings inside the palm count: it passes over a rim's readings, and
+        inflated it rejects grasps that hold (on ../shared/extsim, two objects' best). (f,)
+        bool."""
         if len(cand.rows) == 0:
             return np.zeros(0, bool)
-        hits = count_inside(observed.of(cand.rows), self._boxes(cand, depth),
-                            shrink=OBSERVED_NOISE)
+        boxes = self._boxes(cand, depth)
+        fingers = boxes[:, :2]
+        fingers[:, :, 0] -= self.cfg.collision_margin
+        fingers[:, :, 1] += self.cfg.collision_margin
+        hits = count_inside(observed.of(cand.rows), np.concatenate([fingers, boxes[:, 2:]], 1))
         return hits.max(axis=1) < self.cfg.collision_points
 
 
