@@ -518,7 +518,7 @@ def grasp_frame(frame: Frame, planner, plane_cfg, depth_source: str = "repaired"
 
 def _plan_frame(state: FrameState, planner, depth_source: str, only: int | None):
     """(grasps, object messages) of a frame with objects (``state.instances()``)."""
-    from sr3d_cli.grasp.planner import Cloud, depth_cloud, in_view, mesh_cloud
+    from sr3d_cli.grasp.planner import Cloud, depth_cloud, in_view, mesh_cloud, observed_cloud
 
     frame, source, fid, K = state.frame, state.source, state.frame_id, state.frame.camera.K
     ids, _ = state.instances()
@@ -534,8 +534,9 @@ def _plan_frame(state: FrameState, planner, depth_source: str, only: int | None)
             raise ValueError(why)
     scene = depth_cloud(depth, K, ids, cfg.stride)
     targets = {int(k): scene.select(scene.labels == k) for k in np.unique(ids) if k > 0}
-    surfaces, fallbacks, axes = {}, {}, {}
+    surfaces, fallbacks, axes, observed = {}, {}, {}, None
     if depth_source == "repaired":
+        observed = observed_cloud(frame.depth_m, K, ids)
         placed, opened = {}, {}
         for obj in poses.get("objects", []):
             k = int(obj["id"])
@@ -556,7 +557,7 @@ def _plan_frame(state: FrameState, planner, depth_source: str, only: int | None)
         scene = Cloud.concat([scene] + [c for c, _ in placed.values()])
     if only is not None:
         targets = {only: targets[only]}
-    return planner.plan(scene, targets, plane, surfaces, fallbacks, axes)
+    return planner.plan(scene, targets, plane, surfaces, fallbacks, axes, observed)
 
 
 def load_grasps(source: SceneSource, frame_id: str):

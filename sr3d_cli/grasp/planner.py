@@ -29,7 +29,11 @@ least friction on the model, and a message says when even those need more than `
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
-the depth sees.
+the depth sees. A placed model can be wrong (a handle or a spout it lacks, a flat bottle fitted
+round, a fit too thin or shifted); the sensor's own readings on the objects, which the repaired
+depth replaces with the models, still show where surfaces are: a grasp whose fingers hold
+readings no model accounts for is contradicted by the observation and dropped
+(:meth:`Planner._observation_agrees`).
 """
 
 from __future__ import annotations
@@ -72,6 +76,51 @@ def depth_cloud(depth_m: np.ndarray, K: np.ndarray, ids: np.ndarray, stride: int
     pts, lab = pts[sl], ids[sl]
     ok = pts[..., 2] > 0
     return Cloud(pts[ok], nrm[ok], lab[ok].astype(np.int64))
+
+
+def observed_cloud(depth_m: np.ndarray, K: np.ndarray, ids: np.ndarray,
+                   stride: int = 1) -> Cloud:
+    """The sensor's valid readings (depth ``(H, W)`` metres, 0 or nan: none) on the objects'
+    masks (``ids (H, W)`` int, 0 = none), every ``stride``-th pixel, back-projected, labelled by
+    ``ids``; normals unknown (0). These are the readings a repaired depth replaces with the
+    placed models: each is a surface, whatever the model says (a see-through reading: the
+    surface behind). Each reading's depth is the median of the readings on its surface (within
+    :data:`SAME_SURFACE` of it) in the window :data:`DENOISE_RADIUS` pixels around it: a
+    glass's front-surface returns scatter by several millimetres along their rays, and one
+    alone would put a surface inside a finger that the median of its neighbours puts on the
+    object (see :meth:`Planner.plan`)."""
+    depth = np.where(np.isfinite(depth_m), depth_m, 0.0).astype(np.float64)
+    keep = np.zeros(depth.shape, bool)
+    keep[::stride, ::stride] = True
+    v, u = np.nonzero(keep & (depth > 0) & (ids > 0))
+    r = DENOISE_RADIUS
+    padded = np.pad(depth, r)
+    z = depth[v, u]
+    around = np.stack([padded[v + r + dv, u + r + du] for dv in range(-r, r + 1)
+                       for du in range(-r, r + 1)], axis=1)          # (n, (2r + 1)^2)
+    same = (around > 0) & (np.abs(around - z[:, None]) < SAME_SURFACE)  # the reading is one
+    ranked = np.sort(np.where(same, around, np.inf), axis=1)
+    count, rows = same.sum(axis=1), np.arange(len(z))
+    z = (ranked[rows, (count - 1) // 2] + ranked[rows, count // 2]) / 2  # their median
+    pts = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=1)
+    return Cloud(pts, np.zeros_like(pts), ids[v, u].astype(np.int64))
+
+
+def unexplained(observed: Cloud, models: list["Sections"]) -> Cloud:
+    """The readings of ``observed`` that no placed model (``models``, their outer outlines)
+    accounts for: every point of the reading's ray within :data:`RAY_NOISE` of it (a depth
+    reading errs along its ray, a glass's front-surface return by several millimetres) lies
+    farther than :data:`EXPLAINED` outside each model. A reading inside a model's outline may
+    be its surface or one seen through it; one outside every model is a surface the models
+    lack (a handle, a spout, a flat bottle's edge, an object wider than its fit)."""
+    points = observed.points
+    rays = _unit(points)
+    keep = np.ones(len(points), bool)
+    for step in np.linspace(-RAY_NOISE, RAY_NOISE, RAY_STEPS):
+        for model in models:
+            left = np.flatnonzero(keep)
+            keep[left] = model.outside(points[left] + step * rays[left], EXPLAINED)
+    return observed.select(keep)
 
 
 def mesh_cloud(mesh, T_cam_obj: np.ndarray, scale: float, label: int, count: int,
@@ -130,6 +179,13 @@ THIN_PAIR = 3.0  # a pair shorter than this many pair radii spans a thin wall (P
 LATE_REDRAWS = 1  # redraws of a later rung for an object with failing grasps (Planner.brief)
 SURE = 1e-5  # m, kept from a box's faces where a test on other coordinates must agree
 CHUNK = 96  # frames tried at once (Planner._try_frames): 48 is ~7% slower, 192 no faster
+MIN_SECTION = 3  # target points under the pads that make a section (fewer: a stray sample)
+MAX_CONTACT_ANGLE = np.radians(89.9)  # a contact's angle is capped here: tan stays finite
+EXPLAINED = 0.003  # m, a reading this near a placed model's outline may be its surface
+RAY_NOISE = 0.004  # m, a reading made a median (observed_cloud) errs up to this along its ray
+RAY_STEPS = 5  # points tried along it, under EXPLAINED from the next (2 mm apart)
+SAME_SURFACE = 0.012  # m, readings this near in depth lie on one surface: 3 sd of a glass return
+DENOISE_RADIUS = 2  # px, the window (5 x 5) whose readings on one surface give its median
 
 
 RUN_TOLERANCE = 0.001  # m: a section this near a run's line continues it (Sections.margin)
@@ -176,6 +232,15 @@ class Sections:
 
     def height(self, points: np.ndarray) -> np.ndarray:
         return (points - self.origin) @ self.along
+
+    def outside(self, points: np.ndarray, tolerance: float) -> np.ndarray:
+        """Which ``points (n, 3)`` lie farther than ``tolerance`` (m) outside the model: past
+        its outer radius at their height, or past either end. (n,) bool."""
+        h = self.height(points)
+        z = self.h0 + self.step * np.arange(len(self.radius))
+        r = np.linalg.norm(points - self.origin - np.outer(h, self.along), axis=1)
+        beyond = (h < z[0] - tolerance) | (h > z[-1] + tolerance)
+        return beyond | (r > np.interp(h, z, self.radius) + tolerance)
 
     def margin(self, h: np.ndarray, below: np.ndarray, above: np.ndarray,
                end: float, drop: float = 0.0) -> np.ndarray:
@@ -226,17 +291,24 @@ class Planner:
     def plan(self, scene: Cloud, targets: dict[int, Cloud], plane: Plane,
              surfaces: dict[int, np.ndarray] | None = None,
              fallbacks: dict[int, tuple[Cloud, Cloud, np.ndarray]] | None = None,
-             axes: dict[int, np.ndarray] | None = None) -> tuple[GraspSet, list[str]]:
+             axes: dict[int, np.ndarray] | None = None,
+             observed: Cloud | None = None) -> tuple[GraspSet, list[str]]:
         """Grasps for every object in ``targets`` (contact points), checked against ``scene``
         (every point that can collide, targets included). ``surfaces``: the placed mesh's
         triangles (m, 3, 3) of objects that have one; their best grasps are scored again with
         the jaws closed exactly on it (:meth:`_rescore`). ``fallbacks``: (scene, target,
         triangles) to plan an object on where nothing on its own holds (a lying vessel opened
         at its wider end). ``axes``: a placed mesh's height axis (camera frame),
-        along which its fitted height may be off (default: the table normal). Returns (grasps,
-        object messages)."""
+        along which its fitted height may be off (default: the table normal). ``observed``:
+        the sensor's readings where ``scene`` shows something else (:func:`observed_cloud`:
+        the placed models rendered over the objects' masks); a grasp whose gripper holds
+        some is contradicted by them (:meth:`_observation_agrees`). Returns (grasps, object
+        messages)."""
         sets, messages = [], []
         surfaces, fallbacks, axes = surfaces or {}, fallbacks or {}, axes or {}
+        if observed is not None:
+            observed = unexplained(observed, [Sections.of(t, axes.get(k, plane.normal))
+                                              for k, t in surfaces.items()])
         planners = [self] + ([self.tightened()] if self.cfg.tight_margins > 0 else [])
         if self.cfg.fallback_friction > self.cfg.friction:
             planners.append(self.relaxed())
@@ -254,7 +326,8 @@ class Planner:
             for full, short in ladder:
                 planner = short if len(found) else full
                 for target, cloud, triangles in tries:
-                    grasps, reason, mu = planner._object(k, target, cloud, plane, triangles, axis)
+                    grasps, reason, mu = planner._object(k, target, cloud, plane, triangles, axis,
+                                                         observed)
                     why = why or reason
                     if triangles is None and planner.cfg.friction > self.cfg.friction:
                         mu = planner.cfg.friction  # sampled contacts held only at this one
@@ -299,8 +372,8 @@ class Planner:
     # -- one object -----------------------------------------------------------------------------
 
     def _object(self, k: int, target: Cloud, scene: Cloud, plane: Plane,
-                surface: np.ndarray | None = None, axis: np.ndarray | None = None
-                ) -> tuple[GraspSet, str, float]:
+                surface: np.ndarray | None = None, axis: np.ndarray | None = None,
+                observed: Cloud | None = None) -> tuple[GraspSet, str, float]:
         """Grasps for object ``k``, a reason where there are none, and the friction the best
         one's exact contacts on the placed model ``surface`` need (0 without one: its
         sampled contacts held)."""
@@ -321,6 +394,8 @@ class Planner:
 
         scene = scene.select(collides(scene.points))
         solid = collides(target.points)  # the target's points among them (see _try_frames)
+        if observed is not None:
+            observed = observed.select(collides(observed.points))
         # an object with few holdable places (a goblet's stem, a wide beaker's rim) may get no
         # seed on them: draw other seeds, up to ``redraws`` times, while nothing holds (with a
         # placed mesh: while the best grasp's exact contacts do not hold)
@@ -333,7 +408,8 @@ class Planner:
             R, c, span = self._frames(target, plane, rng)
             pairs += len(R)
             found = [self._try_frames(k, R[s:s + CHUNK], c[s:s + CHUNK], span[s:s + CHUNK],
-                                      target, scene, plane, top, end, sections, solid)
+                                      target, scene, plane, top, end, sections, solid,
+                                      observed)
                      for s in range(0, len(R), CHUNK)]
             grasps = GraspSet.concat([grasps] + [f for f in found if f is not None])
             if len(grasps) == 0:
@@ -555,108 +631,43 @@ class Planner:
 
     def _try_frames(self, k, R, c, span, target: Cloud, scene: Cloud, plane: Plane, top: float,
                     end: tuple[np.ndarray, float], sections: Sections | None = None,
-                    solid: np.ndarray | None = None) -> GraspSet | None:
-        """The best depth of each frame that holds: the object's section between the jaws (see
-        :meth:`_between_jaws`) sets the opening, centred within half the largest opening of
-        the seed pair's midpoint; fingers and palm, inflated by ``collision_margin``, hold
-        fewer than ``collision_points`` scene points and clear the table; both contacts lie
-        inside the friction cone. ``solid``: which target points are also in ``scene``
-        (default all, as :meth:`plan` is given them): at a depth where the palm holds enough
-        of them, wherever the opening centres it, a frame is not tried further."""
-        cfg, g = self.cfg, self.gripper
-        L = g.finger_length
-        # only points that some depth's finger slab can hold matter: find them from their
-        # approach (x) and height (z) coordinates, pack them to the front of each row, and cut
-        # the rows to the longest such list
-        m = cfg.collision_margin
-        local_t = to_local(R, c, target.points)                   # (F, 3, M)
-        x, z = local_t[:, 0], local_t[:, 2]
-        can = (np.abs(z) < g.finger_height / 2 + m) & (x > min(cfg.depths) - L - m) & \
-            (x < max(cfg.depths) + m)
-        keep = max(int(can.sum(axis=1).max()), 1)
-        order = np.argsort(~can, axis=1, kind="stable")[:, :keep]  # (F, K)
-        can = np.take_along_axis(can, order, 1)
-        # the kept points and their normals, turned into each frame: (F, 6, K), rows x y z of
-        # the points then of the normals
-        local = np.concatenate([np.take_along_axis(local_t, order[:, None], 2),
-                                R.transpose(0, 2, 1).astype(np.float32) @
-                                target.normals.astype(np.float32)[order].transpose(0, 2, 1)], 1)
-        x, y, z, ny = local[:, 0], local[:, 1], local[:, 2], local[:, 4]
-        b, within, nb = self._y_bins(y)
-        # the palm's test on the object's own points, where it holds them at any centring
-        # (the opening is centred within max_width / 2): a frame whose palm is inside the
-        # object at a depth (most, at the deeper ones) skips that depth's section work
-        behind = can & (np.abs(y) < g.palm_width / 2 + m - g.max_width / 2 - SURE) & \
-            (np.abs(z) < g.palm_height / 2 + m - SURE)
-        if solid is not None:
-            behind &= solid[order]
-        # scene points in each frame's coordinates, filled in as frames reach the collision test
-        local_s = np.empty((len(R), 3, len(scene.points)), np.float32)
-        seen = np.zeros(len(R), bool)
+                    solid: np.ndarray | None = None,
+                    observed: Cloud | None = None) -> GraspSet | None:
+        """The best depth of each frame (rotations ``R (F, 3, 3)``, seed-pair midpoints ``c
+        (F, 3)``, pair lengths ``span (F,)``) that holds, deepest first; at each depth, in
+        turn: the palm keeps off the object (:meth:`_palm_clear`); the object's section
+        between the jaws sets the opening and centre (:meth:`_sections`); both contacts lie
+        inside the friction cone (:meth:`_contact_friction`); the gripper clears the table
+        (:meth:`_clears_table`), holds no scene point (:meth:`_collision_free`) and no
+        observed reading (:meth:`_observation_agrees`). ``solid``: which target points are
+        also in ``scene`` (default all, as :meth:`plan` is given them; see
+        :meth:`_palm_clear`). ``observed``: the sensor's own readings (see :meth:`plan`)."""
+        g = self.gripper
+        held = _HeldPoints.of(self, R, c, target, solid)
+        scene_local = _LocalPoints(R, c, scene.points)
+        observed_local = None if observed is None else _LocalPoints(R, c, observed.points)
         best = np.full(len(R), -1.0)
         out = np.zeros((len(R), 4))                               # width, depth, ymid, score
-        for depth in sorted(cfg.depths, reverse=True):
+        for depth in sorted(self.cfg.depths, reverse=True):
             rows = np.flatnonzero(best < 0)
-            xr = x[rows]
-            palm = behind[rows] & (xr > depth - L - g.palm_depth - m + SURE) & \
-                (xr < depth - L + m - SURE)
-            free = palm.sum(axis=1) < cfg.collision_points
-            rows, xr = rows[free], xr[free]
-            if len(rows) == 0:
+            rows = rows[self._palm_clear(held, rows, depth)]
+            cand = self._sections(held, rows, depth, span)
+            if cand is None:
                 continue
-            yr = y[rows]
-            # the section under the (inflated) finger pads
-            slab = can[rows] & (xr > depth - L - m) & (xr < depth + m)
-            slab &= self._between_jaws((b[rows], within[rows], nb), slab, span[rows])
-            count = slab.sum(axis=1)
-            y_lo = np.where(slab, yr, np.inf).min(axis=1)
-            y_hi = np.where(slab, yr, -np.inf).max(axis=1)
-            width = (y_hi - y_lo) + 2 * cfg.width_margin
-            ymid = np.where(count > 0, (y_hi + y_lo) / 2, 0.0)
-            ok = (count >= 3) & (width <= g.max_width) & (np.abs(ymid) <= g.max_width / 2)
-            if not ok.any():
-                continue
-            rows, slab, yr = rows[ok], slab[ok], yr[ok]
-            y_lo, y_hi, width, ymid = y_lo[ok], y_hi[ok], width[ok], ymid[ok]
-            # contact normals: the outermost slab points on each side
-            # (of surfaces facing each finger: across a thin wall, the inner surface's points
-            # lie in the band too, facing the other way)
-            nyr = ny[rows]
-            left = slab & (yr < y_lo[:, None] + cfg.contact_band) & (nyr < 0)
-            right = slab & (yr > y_hi[:, None] - cfg.contact_band) & (nyr > 0)
-            sums = local[rows] @ np.stack([left, right], 2).astype(np.float32)  # (f, 6, 2)
-            n_left, n_right = _unit(sums[:, 3:, 0]), _unit(sums[:, 3:, 1])
-            # the line between the two contact patches (their centroids)
-            c_left = sums[:, :3, 0] / np.maximum(left.sum(1), 1)[:, None]
-            c_right = sums[:, :3, 1] / np.maximum(right.sum(1), 1)[:, None]
-            line = _unit(c_right - c_left)
-            ang = np.maximum(np.arccos(np.clip(-np.sum(n_left * line, 1), -1, 1)),
-                             np.arccos(np.clip(np.sum(n_right * line, 1), -1, 1)))
-            mu_needed = np.tan(np.minimum(ang, np.radians(89.9)))
-            ok = mu_needed <= cfg.friction
-            if not ok.any():
-                continue
+            cand.mu = self._contact_friction(held, cand)
+            cand = cand.keep(cand.mu <= self.cfg.friction)
+            cand.centre = c[cand.rows] + R[cand.rows, :, 1] * cand.ymid[:, None]
             # the table first (cheap, and half the survivors fail it), then the scene points
-            rows, width, ymid, mu_needed = rows[ok], width[ok], ymid[ok], mu_needed[ok]
-            centre = c[rows] + R[rows, :, 1] * ymid[:, None]
-            clear = g.lowest(R[rows], centre, width, depth, plane) >= cfg.clearance
-            rows, width, ymid, mu_needed, centre = (a[clear] for a in
-                                                    (rows, width, ymid, mu_needed, centre))
-            if len(rows) == 0:
+            cand = cand.keep(self._clears_table(cand, R, depth, plane))
+            cand = cand.keep(self._collision_free(cand, scene_local, depth))
+            if observed_local is not None:
+                cand = cand.keep(self._observation_agrees(cand, observed_local, depth))
+            if len(cand.rows) == 0:
                 continue
-            fresh = rows[~seen[rows]]          # scene points turned into each frame once
-            if len(fresh):
-                local_s[fresh] = to_local(R[fresh], c[fresh], scene.points)
-                seen[fresh] = True
-            boxes = g.boxes(width, depth)                         # (f, 3, 2, 3)
-            boxes[..., 1] += ymid[:, None, None]                  # centred between the jaws
-            hits = count_inside(local_s[rows], boxes, shrink=-cfg.collision_margin).max(axis=1)
-            free = hits < cfg.collision_points
-            rows, width, ymid, mu_needed, centre = (a[free] for a in
-                                                    (rows, width, ymid, mu_needed, centre))
-            best[rows] = self.score(mu_needed, width, R[rows], centre, plane, top, depth, end,
-                                    sections)
-            out[rows] = np.stack([width, np.full(len(rows), depth), ymid, best[rows]], 1)
+            best[cand.rows] = self.score(cand.mu, cand.width, R[cand.rows], cand.centre, plane,
+                                         top, depth, end, sections)
+            out[cand.rows] = np.stack([cand.width, np.full(len(cand.rows), depth), cand.ymid,
+                                       best[cand.rows]], 1)
         keep = best >= 0
         if not keep.any():
             return None
@@ -665,3 +676,187 @@ class Planner:
         centre = c[keep] + R[keep][:, :, 1] * ymid[:, None]
         return GraspSet(score, w, np.full(n, g.finger_height), d, R[keep], centre,
                         np.full(n, k, np.int64))
+
+    def _palm_clear(self, held: "_HeldPoints", rows: np.ndarray, depth: float) -> np.ndarray:
+        """Which frames ``rows`` keep their palm, at ``depth``, off the object's own solid
+        points (``held.behind``: inside the palm at any centring of the opening), a necessary
+        condition of :meth:`_collision_free` that costs no section work: at the deeper depths
+        most palms are inside the object. (f,) bool."""
+        g, m = self.gripper, self.cfg.collision_margin
+        x = held.local[rows, 0]
+        palm = held.behind[rows] & (x > depth - g.finger_length - g.palm_depth - m + SURE) & \
+            (x < depth - g.finger_length + m - SURE)
+        return palm.sum(axis=1) < self.cfg.collision_points
+
+    def _sections(self, held: "_HeldPoints", rows: np.ndarray, depth: float,
+                  span: np.ndarray) -> "_Candidates | None":
+        """The object's section under the (inflated) finger pads of frames ``rows`` at
+        ``depth``: the target points the jaws enclose (:meth:`_between_jaws`) set the opening
+        (their extent along the closing direction plus ``width_margin`` each side) and the
+        centre (their middle). Frames whose section has fewer than :data:`MIN_SECTION` points,
+        is too wide for the gripper, or whose centre lies farther than half the largest
+        opening from the seed pair's midpoint are dropped; None where none is left."""
+        if len(rows) == 0:
+            return None
+        cfg, g = self.cfg, self.gripper
+        L, m = g.finger_length, cfg.collision_margin
+        x, y = held.local[rows, 0], held.local[rows, 1]
+        slab = held.can[rows] & (x > depth - L - m) & (x < depth + m)
+        b, within, nb = held.bins
+        slab &= self._between_jaws((b[rows], within[rows], nb), slab, span[rows])
+        count = slab.sum(axis=1)
+        y_lo = np.where(slab, y, np.inf).min(axis=1)
+        y_hi = np.where(slab, y, -np.inf).max(axis=1)
+        width = (y_hi - y_lo) + 2 * cfg.width_margin
+        ymid = np.where(count > 0, (y_hi + y_lo) / 2, 0.0)
+        ok = (count >= MIN_SECTION) & (width <= g.max_width) & (np.abs(ymid) <= g.max_width / 2)
+        if not ok.any():
+            return None
+        return _Candidates(rows[ok], width[ok], ymid[ok], slab[ok], y_lo[ok], y_hi[ok])
+
+    def _contact_friction(self, held: "_HeldPoints", cand: "_Candidates") -> np.ndarray:
+        """The friction coefficient (f,) each candidate's two contacts need: each contact is
+        the outermost ``contact_band`` of its section on that side, of the points whose
+        normals face that finger (across a thin wall the inner surface's points lie in the
+        band too, facing the other way); its normal the mean of theirs, and the closing line
+        runs between the two patches' centroids (the larger of the two angles counts)."""
+        band = self.cfg.contact_band
+        local = held.local[cand.rows]
+        y, ny = local[:, 1], local[:, 4]
+        left = cand.slab & (y < cand.y_lo[:, None] + band) & (ny < 0)
+        right = cand.slab & (y > cand.y_hi[:, None] - band) & (ny > 0)
+        sums = local @ np.stack([left, right], 2).astype(np.float32)  # (f, 6, 2)
+        n_left, n_right = _unit(sums[:, 3:, 0]), _unit(sums[:, 3:, 1])
+        c_left = sums[:, :3, 0] / np.maximum(left.sum(1), 1)[:, None]
+        c_right = sums[:, :3, 1] / np.maximum(right.sum(1), 1)[:, None]
+        line = _unit(c_right - c_left)
+        ang = np.maximum(np.arccos(np.clip(-np.sum(n_left * line, 1), -1, 1)),
+                         np.arccos(np.clip(np.sum(n_right * line, 1), -1, 1)))
+        return np.tan(np.minimum(ang, MAX_CONTACT_ANGLE))
+
+    def _clears_table(self, cand: "_Candidates", R: np.ndarray, depth: float,
+                      plane: Plane) -> np.ndarray:
+        """Which candidates keep every corner of the gripper ``clearance`` above the table:
+        (f,) bool."""
+        return self.gripper.lowest(R[cand.rows], cand.centre, cand.width, depth, plane) >= \
+            self.cfg.clearance
+
+    def _boxes(self, cand: "_Candidates", depth: float) -> np.ndarray:
+        """The fingers and palm of each candidate at ``depth``, centred between the jaws:
+        (f, 3, 2, 3) in each frame's coordinates (see :meth:`Gripper.boxes`)."""
+        boxes = self.gripper.boxes(cand.width, depth)
+        boxes[..., 1] += cand.ymid[:, None, None]
+        return boxes
+
+    def _collision_free(self, cand: "_Candidates", scene: "_LocalPoints",
+                        depth: float) -> np.ndarray:
+        """Which candidates' fingers and palm, inflated by ``collision_margin`` (for the
+        model's pose error), hold fewer than ``collision_points`` scene points: (f,) bool."""
+        if len(cand.rows) == 0:
+            return np.zeros(0, bool)
+        hits = count_inside(scene.of(cand.rows), self._boxes(cand, depth),
+                            shrink=-self.cfg.collision_margin)
+        return hits.max(axis=1) < self.cfg.collision_points
+
+    def _observation_agrees(self, cand: "_Candidates", observed: "_LocalPoints",
+                            depth: float) -> np.ndarray:
+        """Which candidates no sensor reading contradicts: each finger, inflated by
+        ``collision_margin``, and the palm hold fewer than ``collision_points`` of the
+        ``observed`` readings no placed model accounts for (:func:`unexplained`). Such a
+        reading is a surface the model lacks (the object wider than its model, or elsewhere;
+        a handle, a spout): a finger on it would close through it on the true object, and one
+        just beside a finger (the pads pass ``width_margin`` from the model) tells of that
+        surface reaching into it, as a glass's readings sample its surface a few pixels in
+        ten. Only readings inside the palm count: it passes over a rim's readings, and
+        inflated it rejects grasps that hold (on ../shared/extsim, two objects' best). (f,)
+        bool."""
+        if len(cand.rows) == 0:
+            return np.zeros(0, bool)
+        boxes = self._boxes(cand, depth)
+        fingers = boxes[:, :2]
+        fingers[:, :, 0] -= self.cfg.collision_margin
+        fingers[:, :, 1] += self.cfg.collision_margin
+        hits = count_inside(observed.of(cand.rows), np.concatenate([fingers, boxes[:, 2:]], 1))
+        return hits.max(axis=1) < self.cfg.collision_points
+
+
+@dataclass
+class _HeldPoints:
+    """The target's points that some depth's finger pads of a chunk of F frames can hold, K per
+    frame (the rows padded): ``local (F, 6, K)`` float32, rows x y z of the points then of their
+    normals in each frame's coordinates; ``can (F, K)``: a real point, not padding;
+    ``behind (F, K)``: a solid point the palm holds at any centring of the opening (up to
+    max_width / 2 either way) within its height (see :meth:`Planner._palm_clear`);
+    ``bins``: :meth:`Planner._y_bins` of the points' y."""
+
+    local: np.ndarray
+    can: np.ndarray
+    behind: np.ndarray
+    bins: tuple
+
+    @classmethod
+    def of(cls, planner: "Planner", R: np.ndarray, c: np.ndarray, target: Cloud,
+           solid: np.ndarray | None) -> "_HeldPoints":
+        """From frames ``R (F, 3, 3)``, ``c (F, 3)``: the points a finger slab can hold at some
+        depth, found from their approach (x) and height (z) coordinates, packed to the front
+        of each row, the rows cut to the longest such list."""
+        cfg, g = planner.cfg, planner.gripper
+        L, m = g.finger_length, cfg.collision_margin
+        local_t = to_local(R, c, target.points)                   # (F, 3, M)
+        x, z = local_t[:, 0], local_t[:, 2]
+        can = (np.abs(z) < g.finger_height / 2 + m) & (x > min(cfg.depths) - L - m) & \
+            (x < max(cfg.depths) + m)
+        keep = max(int(can.sum(axis=1).max()), 1)
+        order = np.argsort(~can, axis=1, kind="stable")[:, :keep]  # (F, K)
+        can = np.take_along_axis(can, order, 1)
+        local = np.concatenate([np.take_along_axis(local_t, order[:, None], 2),
+                                R.transpose(0, 2, 1).astype(np.float32) @
+                                target.normals.astype(np.float32)[order].transpose(0, 2, 1)], 1)
+        y, z = local[:, 1], local[:, 2]
+        behind = can & (np.abs(y) < g.palm_width / 2 + m - g.max_width / 2 - SURE) & \
+            (np.abs(z) < g.palm_height / 2 + m - SURE)
+        if solid is not None:
+            behind &= solid[order]
+        return cls(local, can, behind, planner._y_bins(y))
+
+
+class _LocalPoints:
+    """Points ``(n, 3)`` in the coordinates of frames ``R (F, 3, 3)``, ``c (F, 3)``, each frame's
+    turned once, when it first reaches a test that needs them (:func:`to_local`'s layout)."""
+
+    def __init__(self, R: np.ndarray, c: np.ndarray, points: np.ndarray):
+        self.R, self.c, self.points = R, c, points
+        self.local = np.empty((len(R), 3, len(points)), np.float32)
+        self.seen = np.zeros(len(R), bool)
+
+    def of(self, rows: np.ndarray) -> np.ndarray:
+        """``(f, 3, n)`` for frames ``rows``."""
+        fresh = rows[~self.seen[rows]]
+        if len(fresh):
+            self.local[fresh] = to_local(self.R[fresh], self.c[fresh], self.points)
+            self.seen[fresh] = True
+        return self.local[rows]
+
+
+@dataclass
+class _Candidates:
+    """The frames of a chunk still in the running at one depth: ``rows (f,)`` their indices,
+    and for each the opening ``width (f,)`` m, the centre's offset ``ymid (f,)`` m along the
+    closing direction from the seed pair's midpoint, the section's points ``slab (f, K)`` bool
+    (of :class:`_HeldPoints`) and its extent ``y_lo``, ``y_hi (f,)`` m; filled in later: the
+    friction ``mu (f,)`` the contacts need and the grasp ``centre (f, 3)``."""
+
+    rows: np.ndarray
+    width: np.ndarray
+    ymid: np.ndarray
+    slab: np.ndarray
+    y_lo: np.ndarray
+    y_hi: np.ndarray
+    mu: np.ndarray | None = None
+    centre: np.ndarray | None = None
+
+    def keep(self, ok: np.ndarray) -> "_Candidates":
+        """The candidates where ``ok (f,)`` holds."""
+        return _Candidates(*(None if a is None else a[ok] for a in
+                             (self.rows, self.width, self.ymid, self.slab, self.y_lo, self.y_hi,
+                              self.mu, self.centre)))
