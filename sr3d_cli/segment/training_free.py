@@ -789,7 +789,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     readings miss it (seed 2700 frame 22: 24 of them on it, 56 when placed 4% nearer).
     """
     from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, DEPTH_SAMPLES,
-                                               evenly, fit_revolution, fit_silhouette,
+                                               FitOptions, evenly, fit_revolution, fit_silhouette,
                                                off_table_readings, raw_support, stands_behind,
                                                above_top)
 
@@ -843,7 +843,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             # the near-square lying starts cost a fifth of the segment time (one glass, one
             # core: .52 -> .64 s per frame) and are for the chosen object's fit, not for a cut
             found = fit_revolution(mask, K, plane, depth=depth, occluders=occluders,
-                                   square_starts=False)
+                                   options=FitOptions(square_starts=False))
         except ValueError:  # a part that cannot stand or lie on the table
             found = None
         if occluders is None:
