@@ -9,7 +9,7 @@ import pytest
 import trimesh
 from click.testing import CliRunner
 
-from sr3d_cli.align import AlignError, Aligner
+from sr3d_cli.align import AlignError, Aligner, _Subject
 from sr3d_cli.cli import cli
 from sr3d_cli.config import AlignConfig
 from sr3d_cli.geometry.camera import Camera
@@ -81,7 +81,7 @@ def test_raw_depth_on_the_glass_corrects_the_distance():
     The readings on the object pull it back to within 0.3%; see-through readings alone do not."""
     plane, T, scale, mask, raw, gt = _scene(12)
     aligner = Aligner(AlignConfig())
-    aligner.K, aligner.verts, aligner.faces = K, BOTTLE.vertices, np.asarray(BOTTLE.faces)
+    sub = _Subject.of(BOTTLE, mask, K)
     rng = np.random.default_rng(5)
     ys, xs = np.nonzero(mask)
     part = rng.integers(0, 3, len(xs))
@@ -90,13 +90,13 @@ def test_raw_depth_on_the_glass_corrects_the_distance():
         rng.normal(0, 0.004, (part == 0).sum())
     sensor[ys[part == 1], xs[part == 1]] = _table_depth(plane, xs[part == 1], ys[part == 1])
     assert np.median(sensor[ys[part == 1], xs[part == 1]] - gt[ys[part == 1], xs[part == 1]]) > 0.02
-    factor, info = aligner._depth_correction(T[:3, :3], 1.02 * T[:3, 3], 1.02 * scale, mask,
-                                             sensor, plane)
+    factor, info = aligner._depth_correction(sub, T[:3, :3], 1.02 * T[:3, 3], 1.02 * scale,
+                                             mask, sensor, plane)
     assert abs(1.02 * factor - 1) < 0.003
     assert info["raw_inliers"] > 100
     sensor[ys[part == 0], xs[part == 0]] = 0
-    factor, info = aligner._depth_correction(T[:3, :3], 1.02 * T[:3, 3], 1.02 * scale, mask,
-                                             sensor, plane)
+    factor, info = aligner._depth_correction(sub, T[:3, :3], 1.02 * T[:3, 3], 1.02 * scale,
+                                             mask, sensor, plane)
     assert factor == 1.0 and info["raw_inliers"] < info["raw_points"] * 0.1
 
 
@@ -116,9 +116,9 @@ def test_readings_find_an_object_placed_far_too_far():
 
     def correct(cfg: AlignConfig, depth: np.ndarray) -> float:
         aligner = Aligner(cfg)
-        aligner.K, aligner.verts, aligner.faces = K, BOTTLE.vertices, np.asarray(BOTTLE.faces)
-        return aligner._depth_correction(T[:3, :3], f * T[:3, 3], f * scale, mask, depth,
-                                         plane)[0]
+        sub = _Subject.of(BOTTLE, mask, K)
+        return aligner._depth_correction(sub, T[:3, :3], f * T[:3, 3], f * scale, mask,
+                                         depth, plane)[0]
 
     assert abs(f * correct(AlignConfig(), sensor) - 1) < 0.005
     assert correct(AlignConfig(depth_search=0.0), sensor) == 1.0

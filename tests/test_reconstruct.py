@@ -23,8 +23,9 @@ from sr3d_cli.geometry.transforms import make_T
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_border, check_mask
 from sr3d_cli.shape import revolution_fit
-from sr3d_cli.shape.revolution_fit import (RevolutionFit, _resting_tilt, axial_view_angle, carved,
-                                           fit_revolution, smoothed, straight_walls)
+from sr3d_cli.shape.revolution_fit import (FitOptions, RevolutionFit, _resting_tilt,
+                                           axial_view_angle, carved, fit_revolution, smoothed,
+                                           straight_walls)
 from tests import onnx_builders
 from tests.scenes import GLASS, generated_frame, solids_on_table, table_point
 
@@ -167,7 +168,8 @@ def test_a_beaker_with_a_wide_lip_keeps_a_straight_rim(elevation):
     prof = np.array([[0, 0], [r, 0], [r, h - 0.003], [1.1 * r, h], [0, h]])
     mask = _render(prof, base, plane.normal)
     assert fit_revolution(mask, K, plane).height == pytest.approx(h, rel=0.04)
-    assert fit_revolution(mask, K, plane, straight_top_gap=0.002).height > 1.1 * h
+    loose = FitOptions(straight_top_gap=0.002)
+    assert fit_revolution(mask, K, plane, options=loose).height > 1.1 * h
 
 
 @pytest.mark.parametrize("elevation", [40.0, 56.0, 70.0])
@@ -250,7 +252,7 @@ def test_lying_goblet_recovered_tilted_on_its_foot_and_cup():
     truth = revolve(GOBLET / 0.145)
     errors = {}
     for tolerance in (0.01, -1.0):  # -1: the tilted fit is never kept
-        fit = fit_revolution(mask, K, plane, tilt_tolerance=tolerance)
+        fit = fit_revolution(mask, K, plane, options=FitOptions(tilt_tolerance=tolerance))
         assert fit.resting == "lying"
         errors[tolerance] = (np.degrees(np.arccos(abs(fit.axis @ axis))),
                              abs(fit.height / 0.145 - 1),
@@ -316,9 +318,10 @@ def test_readings_above_a_straight_top_keep_the_domed_one():
     dome = np.column_stack([r * np.cos(t), 0.45 * h + 0.55 * h * np.sin(t)])
     prof = np.vstack([[0, 0], [r, 0], dome, [0.004, h], [0, h]])
     plane, mask, depth, _, _ = _frame_from_above(prof, 64.0, 0.0, 0.1)
-    outline = fit_revolution(mask, K, plane, allow_lying=False)
+    outline = fit_revolution(mask, K, plane, options=FitOptions(allow_lying=False))
     assert outline.height < 0.8 * h  # straight, too short
-    fit = fit_revolution(mask, K, plane, depth=depth, allow_lying=False, axial_view=0.0)
+    fit = fit_revolution(mask, K, plane, depth=depth,
+                         options=FitOptions(allow_lying=False, axial_view=0.0))
     assert fit.height > 0.9 * h
 
 

@@ -28,6 +28,37 @@ from sr3d_cli.geometry.silhouette import fill_silhouette, mask_iou, project_mesh
 from sr3d_cli.geometry.transforms import make_T, rotation_about, unit
 
 
+MIN_MASK_PX = 20  # pixels a mask needs before a mesh is placed on it
+MIN_FACES = 4  # faces of the smallest closed mesh (a tetrahedron)
+FLAT_EXTENT = 1e-9  # object-frame extent at or below which a mesh is flat along an axis
+WINDOW_MARGIN = 0.35  # silhouette window margin, share of the mask box's larger side
+WINDOW_PAD_PX = 4  # pixels added to that margin so that tiny masks keep a border
+SOFT_SIGMA_PX = 1.5  # Gaussian blur of silhouettes in refinement: a smooth IoU to descend
+CONTACT_BAND = 0.02  # unit-mesh heights above its lowest point that count as its contact region
+SIZE_GUESS_ROUNDS = 2  # projections that rescale the size guess to the mask's extent
+EDGE_OFFSET_PX = 0.5  # the contact edge lies half a pixel below the lowest mask pixel centres
+KEYPOINT_ROUNDS = 4  # re-projections of the model's contact edge in the keypoint solve
+PLANE_WEIGHT = 10.0  # weight of the rest-on-the-plane row against one contact-ray row
+HUBER_ROUNDS = 5  # reweighting rounds of the robust (Huber IRLS) keypoint solve
+HUBER_DELTA_M = 0.002  # residual (metres) above which a contact row is down-weighted
+PAPER_BELOW_PX = 3  # paper mode: pixels below the contact edge where the table depth is read
+PAPER_HALF_WINDOW_PX = 2  # paper mode: half side of the square of table readings (5 x 5)
+REFINE_STEP = (0.004, 0.004, 0.05, np.radians(5))  # first simplex: metres, metres, log-scale, yaw
+REFINE_RESTARTS = 2  # Nelder-Mead runs: a restart with a fresh simplex escapes early collapse
+REFINE_STEP_SHRINK = 3  # the restart's simplex is this many times smaller
+REFINE_XATOL = 1e-4  # Nelder-Mead stop: simplex size in the refined parameters
+REFINE_FATOL = 1e-5  # Nelder-Mead stop: spread of soft-IoU errors over the simplex
+DEPTH_ROUNDS = 3  # inlier / median rounds of the depth-correction factor
+DEPTH_VOTE_STEP = 0.005  # spacing of the depth factors that vote (0.5%)
+UPRIGHT_COS = 0.999  # |cos| between the object's +z and the plane normal for "standing upright"
+AXIS_PICK_COS = 0.9  # |n_x| below which x is far enough from the normal to span the plane
+TINY = 1e-9  # guard against dividing by a zero extent or union
+TINY_PX = 1e-6  # guard against dividing by a zero projected extent (pixels)
+TINY_RES = 1e-12  # guard against dividing by a zero residual in the Huber weights
+SCORE_DIGITS = 4  # decimals of the scores written to the pose files
+ERROR_DIGITS = 5  # decimals of refinement errors and depth factors in the diagnostics
+
+
 class AlignError(ValueError):
     """One object cannot be placed (its depth is left untouched)."""
 
@@ -58,7 +89,7 @@ class _Window:
     def __init__(self, mask: np.ndarray, size: int, occluders: np.ndarray | None = None):
         ys, xs = np.nonzero(mask)
         h, w = np.ptp(ys) + 1, np.ptp(xs) + 1
-        pad = int(0.35 * max(h, w)) + 4
+        pad = int(WINDOW_MARGIN * max(h, w)) + WINDOW_PAD_PX
         self.origin = (float(xs.min() - pad), float(ys.min() - pad))
         extent = max(h, w) + 2 * pad
         self.zoom = min(1.0, size / extent)
@@ -78,7 +109,78 @@ class _Window:
 
 
 def _soft(mask: np.ndarray) -> np.ndarray:
-    return cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 1.5)
+    return cv2.GaussianBlur(mask.astype(np.float32), (0, 0), SOFT_SIGMA_PX)
+
+
+@dataclass
+class _Subject:
+    """The arrays one placement works on.
+
+    K : (3, 3) float intrinsics (pixels); verts : (V, 3) float64 mesh vertices, object frame
+    (unit size: ``scale`` makes metres); faces : (F, 3) int; mask_px : (N, 2) float64 pixel
+    (x, y) of every mask pixel."""
+    K: np.ndarray
+    verts: np.ndarray
+    faces: np.ndarray
+    mask_px: np.ndarray
+
+    @classmethod
+    def of(cls, mesh: trimesh.Trimesh, mask: np.ndarray, K: np.ndarray) -> "_Subject":
+        ys, xs = np.nonzero(mask)
+        return cls(K, np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces),
+                   np.column_stack([xs, ys]).astype(np.float64))
+
+
+@dataclass
+class _Placing:
+    """Per-call state of one placement: the subject, the scene it is placed in, where it meets
+    the table, and the counts reported in the diagnostics.
+
+    mask : (H, W) bool; depth_m : (H, W) float raw depth (metres, 0 = none); anchor : (3,)
+    metres, the plane point under the mask's lowest pixel; down : (2,) unit image direction of
+    "down the plane" there; extent_px : the mask box's larger side (pixels)."""
+    subject: _Subject
+    mesh: trimesh.Trimesh
+    mask: np.ndarray
+    depth_m: np.ndarray
+    plane: Plane
+    window: _Window
+    matcher: ViewMatcher
+    anchor: np.ndarray
+    down: np.ndarray
+    symmetric: bool
+    plain: bool
+    extent_px: float
+    renders: int = 0  # silhouettes drawn (see Aligner.render_bound)
+    candidates: int = 0  # orientations view matching scored
+
+
+@dataclass
+class _Seed:
+    """One orientation carried on from view scoring: its score (view match plus upright
+    prior), the prior alone, its resting-orientation group ("hint": the reconstruction's pose),
+    its index among the candidates, and the start pose (R (3, 3), s0, t0 (3,) metres)."""
+    total: float
+    prior: float
+    group: object
+    index: int
+    R: np.ndarray
+    s0: float
+    t0: np.ndarray
+    view: object
+
+
+@dataclass
+class _Choice:
+    """The best placed seed so far: its silhouette IoU plus its prior (what is compared)."""
+    score: float
+    iou: float
+    index: int
+    R: np.ndarray
+    t: np.ndarray
+    scale: float
+    view: object
+    diag: dict
 
 
 class Aligner:
@@ -88,37 +190,40 @@ class Aligner:
         self.cfg = cfg
 
     # ---- shared pieces -------------------------------------------------------------------------
-    def _footprint(self, R, normal) -> tuple[np.ndarray, float]:
-        """Centre of the rotated unit mesh's contact region (points within 0.02 of its lowest
-        point along ``normal``) and that lowest height."""
-        pts = self.verts @ R.T
+    @staticmethod
+    def _footprint(sub: _Subject, R, normal) -> tuple[np.ndarray, float]:
+        """Centre of the rotated unit mesh's contact region (points within ``CONTACT_BAND`` of
+        its lowest point along ``normal``) and that lowest height."""
+        pts = sub.verts @ R.T
         heights = pts @ normal
         low = heights.min()
-        return pts[heights <= low + 0.02].mean(0), float(low)
+        return pts[heights <= low + CONTACT_BAND].mean(0), float(low)
 
-    def _rest_translation(self, R, scale, anchor, plane):
+    def _rest_translation(self, sub: _Subject, R, scale, anchor, plane):
         """t such that the lowest point of the rotated mesh touches the plane under ``anchor``
         (a plane point), with the mesh's footprint centred there."""
-        return anchor - scale * self._footprint(R, plane.normal)[0]
+        return anchor - scale * self._footprint(sub, R, plane.normal)[0]
 
-    def _size_guess(self, R, anchor, plane, extent_px: float) -> float:
+    def _size_guess(self, sub: _Subject, R, anchor, plane, extent_px: float) -> float:
         """Scale making the projected mesh as large as the mask (larger bounding-box side)."""
-        s = float(anchor[2] * extent_px / self.K[0, 0])  # metres spanned by the mask there
-        for _ in range(2):
-            t = self._rest_translation(R, s, anchor, plane)
-            uv, _ = project_mesh(self.verts, R, t, s, self.K)
+        s = float(anchor[2] * extent_px / sub.K[0, 0])  # metres spanned by the mask there
+        for _ in range(SIZE_GUESS_ROUNDS):
+            t = self._rest_translation(sub, R, s, anchor, plane)
+            uv, _ = project_mesh(sub.verts, R, t, s, sub.K)
             uv = uv[np.isfinite(uv).all(1)]
             if len(uv) == 0:
                 break
-            s *= extent_px / max(float(np.ptp(uv, axis=0).max()), 1e-6)
+            s *= extent_px / max(float(np.ptp(uv, axis=0).max()), TINY_PX)
         return s
 
-    def _silhouette(self, R, t, scale, window: _Window) -> np.ndarray:
-        uv, _ = project_mesh(self.verts, R, t, scale, self.K)
-        return fill_silhouette(uv, self.faces, window.shape, window.origin, window.zoom)
+    @staticmethod
+    def _silhouette(sub: _Subject, R, t, scale, window: _Window) -> np.ndarray:
+        uv, _ = project_mesh(sub.verts, R, t, scale, sub.K)
+        return fill_silhouette(uv, sub.faces, window.shape, window.origin, window.zoom)
 
     # ---- keypoint matching ---------------------------------------------------------------------
-    def _contact_edge(self, points_uv: np.ndarray, down: np.ndarray, n: int):
+    @staticmethod
+    def _contact_edge(points_uv: np.ndarray, down: np.ndarray, n: int):
         """Per horizontal bin (``n`` over the extent), the index of the lowest point."""
         across = np.array([-down[1], down[0]])
         h = points_uv @ across
@@ -130,7 +235,7 @@ class Aligner:
         v = np.where(finite, v, -np.inf)
         lo, hi = np.nanmin(h), np.nanmax(h)
         h = np.nan_to_num(h, nan=lo)
-        bins = np.clip(((h - lo) / max(hi - lo, 1e-9) * n).astype(int), 0, n - 1)
+        bins = np.clip(((h - lo) / max(hi - lo, TINY) * n).astype(int), 0, n - 1)
         best = np.full(n, -1)
         best_v = np.full(n, -np.inf)
         for i in np.argsort(v):  # ascending: later (lower) points overwrite
@@ -138,39 +243,23 @@ class Aligner:
             best_v[bins[i]] = v[i]
         return best
 
-    def _keypoints_sr3d(self, R, scale, t, plane, down):
+    def _keypoints_sr3d(self, sub: _Subject, R, scale, t, plane, down):
         """Joint robust least squares for (scale, t) over the contact-edge points."""
-        K, n = self.K, self.cfg.contact_points
-        obs_idx = self._contact_edge(self.mask_px, down, n)
+        K, n = sub.K, self.cfg.contact_points
+        obs_idx = self._contact_edge(sub.mask_px, down, n)
         ok = obs_idx >= 0
-        obs_uv = self.mask_px[obs_idx[ok]] + 0.5 * down  # the edge is half a pixel lower
+        obs_uv = sub.mask_px[obs_idx[ok]] + EDGE_OFFSET_PX * down
         rays = _ray(obs_uv, K)
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-        m_low = (self.verts @ R.T @ plane.normal).min()
+        m_low = (sub.verts @ R.T @ plane.normal).min()
         residuals = np.zeros(0)
-        for _ in range(4):
-            uv, _ = project_mesh(self.verts, R, t, scale, K)
+        for _ in range(KEYPOINT_ROUNDS):
+            uv, _ = project_mesh(sub.verts, R, t, scale, K)
             model_idx = self._contact_edge(uv, down, n)[ok]
             good = model_idx >= 0
-            a = self.verts[model_idx[good]] @ R.T  # (m, 3) rotated object points
-            r = rays[good]
-            rows, rhs = [], []
-            for ri, ai in zip(r, a):
-                C = np.array([[0, -ri[2], ri[1]], [ri[2], 0, -ri[0]], [-ri[1], ri[0], 0]])
-                rows.append(np.column_stack([C @ ai, C]))
-                rhs.append(np.zeros(3))
-            A = np.vstack(rows)
-            b = np.concatenate(rhs)
-            w_plane = 10.0
-            A = np.vstack([A, w_plane * np.concatenate([[m_low], plane.normal])])
-            b = np.concatenate([b, [-w_plane * plane.offset]])
-            weights = np.ones(len(A))
-            for _ in range(5):  # Huber IRLS
-                sol, *_ = np.linalg.lstsq(A * weights[:, None], b * weights, rcond=None)
-                res = np.abs(A @ sol - b)
-                delta = 0.002
-                weights = np.where(res <= delta, 1.0, np.sqrt(delta / np.maximum(res, 1e-12)))
-                weights[-1] = 1.0
+            a = sub.verts[model_idx[good]] @ R.T  # (m, 3) rotated object points
+            A, b = _contact_rows(rays[good], a, m_low, plane)
+            sol = _huber_solve(A, b)
             if not (sol[0] > 0):
                 raise AlignError("keypoint matching gave a non-positive scale")
             scale, t = float(sol[0]), sol[1:]
@@ -179,38 +268,39 @@ class Aligner:
                           "residual_median_m": float(np.median(residuals)) if residuals.size
                           else None}
 
-    def _keypoints_paper(self, R, scale, t, down, depth_m):
+    def _keypoints_paper(self, sub: _Subject, R, scale, t, down, depth_m):
         """The plain method: left / middle / right contact points lifted with raw depth just
         below the mask edge; scale from the left-right distance, translation from the middle."""
-        K, n = self.K, self.cfg.contact_points
-        obs_idx = self._contact_edge(self.mask_px, down, n)
+        K, n = sub.K, self.cfg.contact_points
+        obs_idx = self._contact_edge(sub.mask_px, down, n)
         obs_idx = obs_idx[obs_idx >= 0]
         if len(obs_idx) < 3:
             raise AlignError("contact edge too short")
         reps = [obs_idx[0], obs_idx[len(obs_idx) // 2], obs_idx[-1]]
         lifted = []
         for i in reps:
-            p = self.mask_px[i] + 3 * down
+            p = sub.mask_px[i] + PAPER_BELOW_PX * down
             x, y = int(round(p[0])), int(round(p[1]))
-            win = depth_m[max(0, y - 2):y + 3, max(0, x - 2):x + 3]
+            r = PAPER_HALF_WINDOW_PX
+            win = depth_m[max(0, y - r):y + r + 1, max(0, x - r):x + r + 1]
             z = float(np.median(win[win > 0])) if (win > 0).any() else 0.0
             if z <= 0:
                 raise AlignError("no table depth below the contact edge")
-            lifted.append(_ray(self.mask_px[i], K)[0] * z)
-        uv, _ = project_mesh(self.verts, R, t, scale, K)
+            lifted.append(_ray(sub.mask_px[i], K)[0] * z)
+        uv, _ = project_mesh(sub.verts, R, t, scale, K)
         model_idx = self._contact_edge(uv, down, n)
         model_idx = model_idx[model_idx >= 0]
         mreps = [model_idx[0], model_idx[len(model_idx) // 2], model_idx[-1]]
-        a = self.verts[mreps] @ R.T
+        a = sub.verts[mreps] @ R.T
         span = np.linalg.norm(a[0] - a[2])
-        if span < 1e-9:
+        if span < TINY:
             raise AlignError("model contact edge is a point")
         scale = float(np.linalg.norm(lifted[0] - lifted[2]) / span)
         t = lifted[1] - scale * a[1]
-        return scale, t, {"contact_points": [self.mask_px[i].tolist() for i in reps]}
+        return scale, t, {"contact_points": [sub.mask_px[i].tolist() for i in reps]}
 
     # ---- refinement -----------------------------------------------------------------------------
-    def _refine(self, R, t, scale, plane, window, yaw_free):
+    def _refine(self, sub: _Subject, R, t, scale, plane, window, yaw_free):
         """Silhouette refinement on the plane (Nelder-Mead over shift, log-scale and, with
         ``yaw_free``, yaw). Bounded: at most ``refine_evals`` silhouette renders (a pose met
         again is not redrawn). Monotone: the pose returned is the lowest-error one evaluated, the
@@ -218,12 +308,13 @@ class Aligner:
         Returns (R, t, scale, silhouette (h, w) bool in ``window`` of that pose, info: the
         start's and the end's error and the renders drawn)."""
         n = plane.normal
-        e1 = unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < 0.9 else np.cross(n, [0, 1.0, 0]))
+        e1 = unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < AXIS_PICK_COS
+                  else np.cross(n, [0, 1.0, 0]))
         e2 = np.cross(n, e1)
         obs = _soft(window.obs)
         shown = 1.0 if window.occluders is None else 1.0 - window.occluders
         obs = obs * shown
-        pivot = t + scale * self._footprint(R, n)[0]  # contact centre
+        pivot = t + scale * self._footprint(sub, R, n)[0]  # contact centre
 
         def pose(x):
             dx, dy, ls, yaw = x[0], x[1], x[2], x[3] if yaw_free else 0.0
@@ -231,7 +322,7 @@ class Aligner:
             R1 = Ry @ R
             s1 = scale * np.exp(ls)
             p1 = pivot + dx * e1 + dy * e2
-            foot, low = self._footprint(R1, n)
+            foot, low = self._footprint(sub, R1, n)
             t1 = p1 - s1 * foot
             t1 = t1 - (n @ t1 + s1 * low + plane.offset) * n  # rest on the plane
             return R1, t1, s1
@@ -243,29 +334,31 @@ class Aligner:
             key = np.asarray(x, dtype=np.float64).tobytes()
             if key not in errors:
                 R1, t1, s1 = pose(x)
-                sil = self._silhouette(R1, t1, s1, window)
+                sil = self._silhouette(sub, R1, t1, s1, window)
                 ren = _soft(sil) * shown
                 inter = np.minimum(obs, ren).sum()
-                errors[key] = 1.0 - inter / max(np.maximum(obs, ren).sum(), 1e-9)
+                errors[key] = 1.0 - inter / max(np.maximum(obs, ren).sum(), TINY)
                 if errors[key] < best["error"]:
                     best.update(error=errors[key], x=np.array(x, dtype=np.float64), sil=sil)
             return errors[key]
 
         x = np.zeros(4 if yaw_free else 3)
         start = cost(x)
-        step = np.array([0.004, 0.004, 0.05, np.radians(5)])[:len(x)]
-        for _ in range(2):  # a restart with a fresh simplex escapes early collapse
+        step = np.array(REFINE_STEP)[:len(x)]
+        for _ in range(REFINE_RESTARTS):
             simplex = np.vstack([x] + [x + np.eye(len(x))[i] * step[i] for i in range(len(x))])
             # scipy stops a run at maxfev calls of cost, memoised ones included
             minimize(cost, x, method="Nelder-Mead",
-                     options={"initial_simplex": simplex, "maxfev": self.cfg.refine_evals // 2,
-                              "xatol": 1e-4, "fatol": 1e-5})
+                     options={"initial_simplex": simplex,
+                              "maxfev": self.cfg.refine_evals // REFINE_RESTARTS,
+                              "xatol": REFINE_XATOL, "fatol": REFINE_FATOL})
             x = best["x"]
-            step = step / 3
+            step = step / REFINE_STEP_SHRINK
         R1, t1, s1 = pose(best["x"])
-        return R1, t1, s1, best["sil"], {"refine_error_start": round(float(start), 5),
-                                         "refine_error": round(float(best["error"]), 5),
-                                         "refine_renders": len(errors)}
+        return R1, t1, s1, best["sil"], {
+            "refine_error_start": round(float(start), ERROR_DIGITS),
+            "refine_error": round(float(best["error"]), ERROR_DIGITS),
+            "refine_renders": len(errors)}
 
     def render_bound(self, mesh: trimesh.Trimesh | None = None) -> int:
         """The most silhouette renders one placement draws (its bounded cost): every candidate
@@ -281,7 +374,8 @@ class Aligner:
         return rests * cfg.yaw_steps + 1 + (cfg.top_candidates + 1) * (refined + 1)
 
     # ---- raw depth on the object ----------------------------------------------------------------
-    def _depth_correction(self, R, t, scale, mask, depth_m, plane) -> tuple[float, dict]:
+    def _depth_correction(self, sub: _Subject, R, t, scale, mask, depth_m,
+                          plane) -> tuple[float, dict]:
         """Factor ``f`` for a similarity about the camera centre (``t *= f``, ``scale *= f``),
         which leaves the silhouette unchanged, that brings the placed model's front surface onto
         the raw depth readings lying on it: readings within ``depth_inlier`` of the model,
@@ -304,30 +398,31 @@ class Aligner:
         sampled = np.linspace(0, len(xs) - 1, min(len(xs), cfg.depth_samples)).astype(np.int64)
         need *= len(sampled) / len(xs)  # in sampled readings
         ys, xs = ys[sampled], xs[sampled]
-        uv, pts = project_mesh(self.verts, R, t, scale, self.K)
-        z_model = surface_depth(uv, pts, self.faces, self.K, xs, ys, mask.shape)
+        uv, pts = project_mesh(sub.verts, R, t, scale, sub.K)
+        z_model = surface_depth(uv, pts, sub.faces, sub.K, xs, ys, mask.shape)
         hit = np.isfinite(z_model)
         raw, z_model = depth_m[ys, xs].astype(np.float64)[hit], z_model[hit]
-        start = self._depth_vote(raw, z_model, np.column_stack([xs, ys])[hit], plane, need)
+        start = self._depth_vote(sub, raw, z_model, np.column_stack([xs, ys])[hit], plane, need)
         lo, hi = start * (1 - cfg.depth_max_change), start * (1 + cfg.depth_max_change)
         factor, inliers = start, np.zeros(len(raw), bool)
-        for _ in range(3):
+        for _ in range(DEPTH_ROUNDS):
             inliers = np.abs(raw - factor * z_model) < cfg.depth_inlier
             if inliers.sum() < need:
                 return 1.0, {**info, "raw_inliers": int(inliers.sum())}
             factor = float(np.clip(np.median(raw[inliers] / z_model[inliers]), lo, hi))
-        return factor, {**info, "raw_inliers": int(inliers.sum()), "depth_factor": round(factor, 5)}
+        return factor, {**info, "raw_inliers": int(inliers.sum()),
+                        "depth_factor": round(factor, ERROR_DIGITS)}
 
-    def _depth_vote(self, raw, z_model, px, plane, need) -> float:
+    def _depth_vote(self, sub: _Subject, raw, z_model, px, plane, need) -> float:
         """The factor within ``depth_search`` on whose surface most off-table readings lie, if
         it beats the placed surface (factor 1) ``depth_vote`` times over and holds
         ``depth_agree`` of them; else 1."""
         cfg = self.cfg
         if cfg.depth_search <= cfg.depth_max_change:
             return 1.0
-        off = plane.height(unproject(px.astype(np.float64), raw, self.K)) > cfg.depth_inlier
+        off = plane.height(unproject(px.astype(np.float64), raw, sub.K)) > cfg.depth_inlier
         raw, z_model = raw[off], z_model[off]
-        steps = int(np.ceil(cfg.depth_search / 0.005))  # factors 0.5% apart
+        steps = int(np.ceil(cfg.depth_search / DEPTH_VOTE_STEP))
         factors = 1 + np.linspace(-cfg.depth_search, cfg.depth_search, 2 * steps + 1)
         votes = (np.abs(raw[:, None] - factors[None] * z_model[:, None])
                  < cfg.depth_inlier).sum(0)
@@ -350,124 +445,194 @@ class Aligner:
         occluders : (H, W) bool pixels of objects in front that may hide this one: silhouettes
         are compared with the mask elsewhere (sr3d mode; view matching uses the whole mask)."""
         cfg = self.cfg
-        if mask.sum() < 20:
-            raise AlignError(f"mask has {int(mask.sum())} px: too small to place a mesh")
-        if len(mesh.faces) < 4 or not np.isfinite(mesh.vertices).all() or \
-                np.ptp(mesh.vertices, axis=0).min() <= 1e-9:
-            raise AlignError("degenerate mesh (fewer than 4 faces, not finite, or flat)")
-        if plane is None:
-            raise AlignError("no support plane visible: cannot place the object")
-        self.K = K
-        self.verts = np.asarray(mesh.vertices, dtype=np.float64)
-        self.faces = np.asarray(mesh.faces)
-        ys, xs = np.nonzero(mask)
-        self.mask_px = np.column_stack([xs, ys]).astype(np.float64)
-        window = _Window(mask, cfg.window, None if cfg.mode == "paper" else occluders)
+        _check_inputs(mesh, mask, plane)
+        p = self._start(mesh, mask, K, plane, depth_m, occluders)
+        best = None
+        for batch in (lambda: self._hint_seed(p, hint), lambda: self._candidates(p)):
+            if best is not None and best.iou >= cfg.hint_accept:
+                break  # the reconstruction's own pose explains the mask: no search needed
+            for seed in batch():
+                placed = self._place_seed(p, seed)
+                if placed is None:
+                    continue
+                R, t, scale, sil, diag = placed
+                if sil is None:
+                    sil = self._silhouette(p.subject, R, t, scale, p.window)
+                    p.renders += 1
+                iou = mask_iou(sil, p.window.obs, p.window.occluders)
+                if best is None or iou + seed.prior > best.score:
+                    best = _Choice(iou + seed.prior, iou, seed.index, R, t, scale, seed.view,
+                                   diag)
+        if best is None:
+            raise AlignError("no candidate orientation could be matched to the contact edge")
+        t, scale, diag = best.t, best.scale, best.diag
+        if cfg.use_depth and not p.plain:
+            factor, info = self._depth_correction(p.subject, best.R, t, scale, mask, depth_m,
+                                                  plane)
+            t, scale = np.asarray(t, dtype=np.float64) * factor, scale * factor
+            diag = {**diag, **info}
+        return self._placement(p, best, t, scale, diag)
+
+    def _start(self, mesh, mask, K, plane, depth_m, occluders) -> _Placing:
+        """The per-call state: silhouette window, view matcher, and where the object meets the
+        table (the plane point under the mask's lowest pixel, and the image's "down" there)."""
+        cfg = self.cfg
+        sub = _Subject.of(mesh, mask, K)
+        plain = cfg.mode == "paper"
+        window = _Window(mask, cfg.window, None if plain else occluders)
         matcher = ViewMatcher(mask, alpha=cfg.alpha, beta=cfg.beta, gamma=cfg.gamma,
                               patches=cfg.patches)
-        # the object's place on the table and the image's "down" there
-        centre = self.mask_px.mean(0)
-        bottom = self.mask_px[np.argmax(self.mask_px @ plane.down_at(centre, K))]
+        centre = sub.mask_px.mean(0)
+        bottom = sub.mask_px[np.argmax(sub.mask_px @ plane.down_at(centre, K))]
         anchor = plane.intersect(_ray(bottom, K))[0]
         if not np.all(np.isfinite(anchor)):
             raise AlignError("the object's contact edge does not meet the support plane")
-        down = plane.down_at(bottom, K)
-        symmetric = is_axisymmetric(mesh)
-        plain = cfg.mode == "paper"
-        searched = {"candidates": 0}
-        extent_px = float(max(np.ptp(xs), np.ptp(ys)) + 1)
-        renders = [0]  # silhouettes drawn for this placement (see render_bound)
+        ys, xs = np.nonzero(mask)
+        return _Placing(sub, mesh, mask, depth_m, plane, window, matcher, anchor,
+                        plane.down_at(bottom, K), is_axisymmetric(mesh), plain,
+                        float(max(np.ptp(xs), np.ptp(ys)) + 1))
 
-        def searched_candidates():
-            """View matching over the candidate orientations: the best view of each resting
-            orientation (the best few) goes on to keypoints and refinement."""
-            if plain:
-                rotations = candidates_sphere(cfg.views, cfg.rolls, -unit(anchor))
+    def _candidates(self, p: _Placing) -> list[_Seed]:
+        """View matching over the candidate orientations: the best view of each resting
+        orientation (the best few) goes on to keypoints and refinement."""
+        cfg = self.cfg
+        if p.plain:
+            rotations = candidates_sphere(cfg.views, cfg.rolls, -unit(p.anchor))
+        else:
+            rotations = candidates_plane(p.mesh, p.plane.normal, p.symmetric, cfg.yaw_steps,
+                                         cfg.max_rests)
+        p.candidates = len(rotations)
+        p.renders += len(rotations)
+        scored = [self._score_view(p, group, i, R) for i, (group, R) in enumerate(rotations)]
+        scored.sort(key=lambda c: -c.total)
+        carried, groups = [], set()
+        for c in scored:
+            if c.group not in groups:
+                groups.add(c.group)
+                carried.append(c)
+        return carried[:1 if p.plain else cfg.top_candidates]
+
+    def _score_view(self, p: _Placing, group, i: int, R: np.ndarray) -> _Seed:
+        """One candidate orientation at its size guess, resting on the plane at the anchor,
+        scored by view matching plus the upright prior."""
+        sub = p.subject
+        s0 = self._size_guess(sub, R, p.anchor, p.plane, p.extent_px)
+        t0 = self._rest_translation(sub, R, s0, p.anchor, p.plane)
+        view, _ = p.matcher.render_and_score(sub.verts, sub.faces, R, t0, s0, sub.K,
+                                             p.window.spec)
+        prior = 0.0 if p.plain else self._upright_prior(R, p.plane)
+        return _Seed(view.total + prior, prior, group, i, R, s0, t0, view)
+
+    def _upright_prior(self, R: np.ndarray, plane: Plane) -> float:
+        """Objects stand the right way up more often than upside down (+z up)."""
+        return self.cfg.upright_prior * max(0.0, float(R[:, 2] @ plane.normal))
+
+    def _hint_seed(self, p: _Placing, hint) -> list[_Seed]:
+        """The reconstruction's pose as one more seed (sr3d mode, when there is one)."""
+        if hint is None or p.plain:
+            return []
+        T_h, s_h = np.asarray(hint[0], dtype=np.float64), float(hint[1])
+        p.renders += 1
+        view, _ = p.matcher.render_and_score(p.subject.verts, p.subject.faces, T_h[:3, :3],
+                                             T_h[:3, 3], s_h, p.subject.K, p.window.spec)
+        return [_Seed(view.total, self._upright_prior(T_h[:3, :3], p.plane), "hint", -1,
+                      T_h[:3, :3], s_h, T_h[:3, 3], view)]
+
+    def _place_seed(self, p: _Placing, seed: _Seed):
+        """Keypoint solve and refinement of one seed: (R, t, scale, its silhouette in the window
+        or None, diagnostics), or None when its contact edge cannot be matched (sr3d mode)."""
+        cfg = self.cfg
+        R = seed.R
+        sil = None
+        if seed.group == "hint":
+            diag = {"seed": "reconstruction pose"}
+            if cfg.refine_hint:
+                R, t, scale, sil, info = self._refine_seed(p, R, seed.t0, seed.s0)
+                diag.update(info)
             else:
-                rotations = candidates_plane(mesh, plane.normal, symmetric, cfg.yaw_steps,
-                                             cfg.max_rests)
-            searched["candidates"] = len(rotations)
-            renders[0] += len(rotations)
-            scored = []
-            for i, (group, R) in enumerate(rotations):
-                s0 = self._size_guess(R, anchor, plane, extent_px)
-                t0 = self._rest_translation(R, s0, anchor, plane)
-                view, _ = matcher.render_and_score(self.verts, self.faces, R, t0, s0, K,
-                                                   window.spec)
-                # objects stand the right way up more often than upside down (+z up)
-                prior = 0.0 if plain else cfg.upright_prior * max(0.0, float(R[:, 2]
-                                                                             @ plane.normal))
-                scored.append((view.total + prior, prior, group, i, R, s0, t0, view))
-            scored.sort(key=lambda c: -c[0])
-            carried, groups = [], set()
-            for c in scored:
-                if c[2] not in groups:
-                    groups.add(c[2])
-                    carried.append(c)
-            return carried[:1 if plain else cfg.top_candidates]
-
-        def hinted():
-            if hint is None or plain:
-                return []
-            T_h, s_h = np.asarray(hint[0], dtype=np.float64), float(hint[1])
-            renders[0] += 1
-            view, _ = matcher.render_and_score(self.verts, self.faces, T_h[:3, :3], T_h[:3, 3],
-                                               s_h, K, window.spec)
-            prior = cfg.upright_prior * max(0.0, float(T_h[:3, 2] @ plane.normal))
-            return [(view.total, prior, "hint", -1, T_h[:3, :3], s_h, T_h[:3, 3], view)]
-
-        def refine(R, t, scale):
-            """(R, t, scale, its silhouette in ``window`` or None, refinement info)."""
-            if not cfg.refine:
-                return R, t, scale, None, {}
-            R, t, scale, sil, info = self._refine(
-                R, t, scale, plane, window, yaw_free=not (symmetric and self._upright(R, plane)))
-            renders[0] += info["refine_renders"]
-            return R, t, scale, sil, info
-
-        best = None
-        for batch in (hinted, searched_candidates):
-            if best is not None and best[1] >= cfg.hint_accept:
-                break  # the reconstruction's own pose explains the mask: no search needed
-            for _total, prior, group, i, R, s0, t0, view in batch():
-                sil = None
-                if group == "hint":
-                    diag = {"seed": "reconstruction pose"}
-                    if cfg.refine_hint:
-                        R, t, scale, sil, info = refine(R, t0, s0)
-                        diag.update(info)
-                    else:
-                        t, scale = t0, s0
-                elif plain:
-                    scale, t, diag = self._keypoints_paper(R, s0, t0, down, depth_m)
-                else:
-                    try:
-                        scale, t, diag = self._keypoints_sr3d(R, s0, t0, plane, down)
-                    except AlignError:
-                        continue
-                    R, t, scale, sil, info = refine(R, t, scale)
-                    diag = {**diag, **info}
-                if sil is None:
-                    sil = self._silhouette(R, t, scale, window)
-                    renders[0] += 1
-                iou = mask_iou(sil, window.obs, window.occluders)
-                if best is None or iou + prior > best[0]:
-                    best = (iou + prior, iou, i, R, t, scale, view, diag)
-        if best is None:
-            raise AlignError("no candidate orientation could be matched to the contact edge")
-        _, iou, i, R, t, scale, view, diag = best
-        if cfg.use_depth and not plain:
-            factor, info = self._depth_correction(R, t, scale, mask, depth_m, plane)
-            t, scale = np.asarray(t, dtype=np.float64) * factor, scale * factor
+                t, scale = seed.t0, seed.s0
+        elif p.plain:
+            scale, t, diag = self._keypoints_paper(p.subject, R, seed.s0, seed.t0, p.down,
+                                                   p.depth_m)
+        else:
+            try:
+                scale, t, diag = self._keypoints_sr3d(p.subject, R, seed.s0, seed.t0, p.plane,
+                                                      p.down)
+            except AlignError:
+                return None
+            R, t, scale, sil, info = self._refine_seed(p, R, t, scale)
             diag = {**diag, **info}
-        scores = {"view": round(view.total, 4), "ssim": round(view.ssim, 4),
-                  "edges": round(view.edges, 4), "aspect": round(view.aspect, 4),
-                  "silhouette_iou": round(iou, 4)}
-        diagnostics = {"mode": cfg.mode, "best_view": int(i),
-                       "candidates": searched["candidates"], "axisymmetric": bool(symmetric),
-                       "renders": renders[0], **diag}
-        return Placement(R, np.asarray(t, dtype=np.float64), float(scale), scores, diagnostics)
+        return R, t, scale, sil, diag
+
+    def _refine_seed(self, p: _Placing, R, t, scale):
+        """(R, t, scale, its silhouette in the window or None, refinement info); yaw stays fixed
+        for an axisymmetric mesh standing upright (turning it changes nothing)."""
+        if not self.cfg.refine:
+            return R, t, scale, None, {}
+        R, t, scale, sil, info = self._refine(
+            p.subject, R, t, scale, p.plane, p.window,
+            yaw_free=not (p.symmetric and self._upright(R, p.plane)))
+        p.renders += info["refine_renders"]
+        return R, t, scale, sil, info
+
+    def _placement(self, p: _Placing, best: _Choice, t, scale, diag) -> Placement:
+        """The chosen pose with its scores and diagnostics."""
+        view = best.view
+        scores = {"view": round(view.total, SCORE_DIGITS), "ssim": round(view.ssim, SCORE_DIGITS),
+                  "edges": round(view.edges, SCORE_DIGITS),
+                  "aspect": round(view.aspect, SCORE_DIGITS),
+                  "silhouette_iou": round(best.iou, SCORE_DIGITS)}
+        diagnostics = {"mode": self.cfg.mode, "best_view": int(best.index),
+                       "candidates": p.candidates, "axisymmetric": bool(p.symmetric),
+                       "renders": p.renders, **diag}
+        return Placement(best.R, np.asarray(t, dtype=np.float64), float(scale), scores,
+                         diagnostics)
 
     @staticmethod
     def _upright(R, plane) -> bool:
-        return abs((R @ np.array([0, 0, 1.0])) @ plane.normal) > 0.999
+        return abs((R @ np.array([0, 0, 1.0])) @ plane.normal) > UPRIGHT_COS
+
+
+def _check_inputs(mesh: trimesh.Trimesh, mask: np.ndarray, plane: Plane | None) -> None:
+    """AlignError for a mask too small, a degenerate mesh, or no support plane."""
+    if mask.sum() < MIN_MASK_PX:
+        raise AlignError(f"mask has {int(mask.sum())} px: too small to place a mesh")
+    if len(mesh.faces) < MIN_FACES or not np.isfinite(mesh.vertices).all() or \
+            np.ptp(mesh.vertices, axis=0).min() <= FLAT_EXTENT:
+        raise AlignError("degenerate mesh (fewer than 4 faces, not finite, or flat)")
+    if plane is None:
+        raise AlignError("no support plane visible: cannot place the object")
+
+
+def _contact_rows(rays: np.ndarray, a: np.ndarray, m_low: float,
+                  plane: Plane) -> tuple[np.ndarray, np.ndarray]:
+    """Linear system in (scale, t): each rotated model point ``scale * a_i + t`` must lie on its
+    contact ray (cross product with the ray is zero: three rows each), and the model's lowest
+    point ``m_low`` (unit mesh, along the normal) must rest on the plane (the last row,
+    weighted ``PLANE_WEIGHT``).
+
+    rays : (m, 3) unit camera rays; a : (m, 3) rotated unit-mesh points. Returns A (3m + 1, 4),
+    b (3m + 1,)."""
+    rows, rhs = [], []
+    for ri, ai in zip(rays, a):
+        C = np.array([[0, -ri[2], ri[1]], [ri[2], 0, -ri[0]], [-ri[1], ri[0], 0]])
+        rows.append(np.column_stack([C @ ai, C]))
+        rhs.append(np.zeros(3))
+    A = np.vstack(rows)
+    b = np.concatenate(rhs)
+    A = np.vstack([A, PLANE_WEIGHT * np.concatenate([[m_low], plane.normal])])
+    b = np.concatenate([b, [-PLANE_WEIGHT * plane.offset]])
+    return A, b
+
+
+def _huber_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Robust least squares (Huber IRLS, ``HUBER_ROUNDS`` rounds, ``HUBER_DELTA_M``) of
+    ``A x = b``; the last row (the plane) keeps full weight. Returns x (4,): scale, t."""
+    weights = np.ones(len(A))
+    for _ in range(HUBER_ROUNDS):
+        sol, *_ = np.linalg.lstsq(A * weights[:, None], b * weights, rcond=None)
+        res = np.abs(A @ sol - b)
+        weights = np.where(res <= HUBER_DELTA_M, 1.0,
+                           np.sqrt(HUBER_DELTA_M / np.maximum(res, TINY_RES)))
+        weights[-1] = 1.0
+    return sol

@@ -20,9 +20,9 @@ from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.geometry.transforms import apply_T, place_points
 from sr3d_cli.reconstruct.bowls import bowl_instead
 from sr3d_cli.reconstruct.handles import handle_slab, split_handle
-from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, RevolutionFit, carved, fit_revolution,
-                                           off_table_readings, raw_support, smoothed,
-                                           straight_walls)
+from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, FitOptions, RevolutionFit, carved,
+                                           fit_revolution, off_table_readings, raw_support,
+                                           smoothed, straight_walls)
 
 BASE_SHARE = 0.15  # of the height: the profile's lowest part, whose widest ring is the base
 MIN_AXIS_PX = 10  # pixels the projected axis must span for its upper half to be told apart
@@ -124,11 +124,12 @@ def configured_fit(mask: np.ndarray, K: np.ndarray, plane: Plane, cfg: Reconstru
     """:func:`fit_revolution` with the ``reconstruct`` config's settings (the one place they
     are passed on); ``depth`` is used when ``use_depth`` is on; ``occluders``: the pixels of
     objects in front that may hide this one."""
-    return fit_revolution(mask, K, plane, levels=cfg.levels, iterations=cfg.iterations,
-                          lying_margin=cfg.lying_margin,
-                          depth=depth if cfg.use_depth else None, depth_vote=cfg.depth_vote,
-                          axial_view=cfg.axial_view, openings=lambda fit: mouths(fit, cfg),
-                          occluders=occluders)
+    options = FitOptions(levels=cfg.levels, iterations=cfg.iterations,
+                         lying_margin=cfg.lying_margin, depth_vote=cfg.depth_vote,
+                         axial_view=cfg.axial_view)
+    return fit_revolution(mask, K, plane, depth=depth if cfg.use_depth else None,
+                          openings=lambda fit: mouths(fit, cfg), occluders=occluders,
+                          options=options)
 
 
 def mouths(fit: RevolutionFit, cfg: ReconstructConfig) -> list[RevolutionFit]:

@@ -32,7 +32,7 @@ The steps:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -41,6 +41,10 @@ from scipy import ndimage
 from sr3d_cli.geometry.camera import depth_to_points, unproject
 from sr3d_cli.geometry.occlusion import down_direction, in_front
 from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, DEPTH_SAMPLES,
+                                           FitOptions, above_top, evenly, fit_revolution,
+                                           fit_silhouette, off_table_readings, raw_support,
+                                           stands_behind)
 
 
 ON_TABLE_SHARE = 0.3  # least share of a candidate over the table's footprint
@@ -731,6 +735,291 @@ def _footprint_cut(region: np.ndarray, xs: np.ndarray, ys: np.ndarray, raw: np.n
     return a, b
 
 
+class _PartFits:
+    """:func:`~sr3d_cli.shape.revolution_fit.fit_revolution` of a region's parts (None for a
+    part that cannot stand or lie on the table), with the near-square lying starts off: they
+    cost a fifth of the segment time (one glass, one core: .52 -> .64 s per frame) and are for
+    the chosen object's fit, not for a cut. A part's fit without occluders is made once, kept
+    by the mask's id (the masks live as long as the judging of the region's cuts)."""
+
+    def __init__(self, K: np.ndarray, plane: Plane, depth: np.ndarray | None):
+        self.K, self.plane, self.depth = K, plane, depth
+        self.alone: dict = {}  # id of a part's mask: its fit without occluders
+
+    def __call__(self, mask: np.ndarray, occluders: np.ndarray | None = None):
+        if occluders is None and id(mask) in self.alone:
+            return self.alone[id(mask)]
+        try:
+            found = fit_revolution(mask, self.K, self.plane, depth=self.depth,
+                                   occluders=occluders, options=FitOptions(square_starts=False))
+        except ValueError:  # a part that cannot stand or lie on the table
+            found = None
+        if occluders is None:
+            self.alone[id(mask)] = found
+        return found
+
+
+@dataclass
+class _RegionReadings:
+    """A region's off-table raw readings, weighed against the fits of it and of its parts.
+
+    every : (xs, ys, raw) all of them (pixels, metres); sample : (xs, ys, raw) at most
+    ``DEPTH_SAMPLES`` of them spread evenly (as fit_revolution samples them); heights : (n,)
+    metres above the table of the sample; shares : :meth:`own_share`'s answers for the cut being
+    judged (cleared for each)."""
+    every: tuple
+    sample: tuple
+    heights: np.ndarray
+    K: np.ndarray
+    plane: Plane
+    shares: dict = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, region: np.ndarray, depth: np.ndarray, K: np.ndarray,
+           plane: Plane) -> "_RegionReadings | None":
+        """The region's readings; None with fewer than ``DEPTH_MIN_POINTS`` in the sample."""
+        every = off_table_readings(region, depth, K, plane, samples=int(region.sum()))
+        sample = evenly(every, DEPTH_SAMPLES)
+        heights = plane.height(unproject(np.column_stack(sample[:2]).astype(np.float64),
+                                         sample[2], K))
+        if len(sample[0]) < DEPTH_MIN_POINTS:
+            return None
+        return cls(every, sample, heights, K, plane)
+
+    def on_surface(self, found, mask: np.ndarray) -> int:
+        """How many of the region's readings in ``mask`` lie on the fit's surface."""
+        xs, ys, raw = (r[mask[self.sample[1], self.sample[0]]] for r in self.sample)
+        return 0 if found is None else raw_support(found, xs, ys, raw, self.K, mask.shape,
+                                                   DEPTH_BAND)
+
+    def count_in(self, mask: np.ndarray) -> int:
+        """How many of the region's readings lie in ``mask``."""
+        return int(mask[self.sample[1], self.sample[0]].sum())
+
+    def above(self, found, mask: np.ndarray) -> int:
+        """How many of the region's readings in ``mask`` stand above the fit (:func:`above_top`)."""
+        return above_top(found, self.heights[mask[self.sample[1], self.sample[0]]], self.plane,
+                         DEPTH_BAND)
+
+    def own_share(self, found, mask: np.ndarray) -> float | None:
+        """The share of the part's own readings (up to ``DEPTH_SAMPLES`` of them: a small
+        object gets few of the region's sample) on the fit's surface; None with fewer than
+        ``DEPTH_MIN_POINTS``. Each is computed once per cut: the rules ask for the same
+        fit and part several times."""
+        key = (id(found), id(mask))
+        if key not in self.shares:  # the fit and the mask are kept with it: their ids stay theirs
+            inside = mask[self.every[1], self.every[0]]
+            xs, ys, raw = evenly(tuple(r[inside] for r in self.every), DEPTH_SAMPLES)
+            share = None if len(xs) < DEPTH_MIN_POINTS else 0.0 if found is None else \
+                raw_support(found, xs, ys, raw, self.K, mask.shape, DEPTH_BAND) / len(xs)
+            self.shares[key] = (found, mask, share)
+        return self.shares[key][2]
+
+
+@dataclass
+class _Whole:
+    """The fit of the whole region a cut is judged against, and (with readings) how many of
+    the region's readings lie on its surface."""
+    fit: object
+    on: int | None
+
+    @property
+    def margin(self) -> float:
+        """Readings by which the parts must beat the whole (or lose to it to be refuted)."""
+        return max(DEPTH_MIN_POINTS, SPLIT_READINGS * self.on)
+
+
+@dataclass
+class _Region:
+    """A region being split: its mask (H, W) bool, the camera, the table, the image's "down"
+    there, its parts' fits, its readings (None without enough) and the IoU gain a cut needs."""
+    mask: np.ndarray
+    K: np.ndarray
+    plane: Plane
+    down: np.ndarray
+    fits: _PartFits
+    readings: _RegionReadings | None
+    gain: float
+
+
+def _outline_cuts(region: np.ndarray, glass: np.ndarray | None, max_pieces: int,
+                  min_share: float, min_area: int, close_radius: int
+                  ) -> tuple[list[tuple[np.ndarray, np.ndarray]], range]:
+    """The cuts the outline and the evidence make: every grouping of the watershed pieces into
+    two connected parts, each at least ``min_share`` of the region, then the cuts between the
+    ``glass`` evidence's bodies (:func:`_evidence_cuts`, parts at least ``min_area``). Returns
+    the cuts and the range of their indices that cut one body from all the rest (ranked below
+    the others)."""
+    labels, n, length = _pieces(region, max_pieces)
+    area = float(region.sum())
+    cuts = []
+    for bits in range(1, 2 ** (n - 1)):  # piece n stays in the second part
+        first = [k for k in range(1, n + 1) if bits >> (k - 1) & 1]
+        second = [k for k in range(1, n + 1) if k not in first]
+        if _connected(first, length) and _connected(second, length):
+            a = np.isin(labels, first)
+            if min(a.sum(), area - a.sum()) >= min_share * area:
+                cuts.append((a, region & ~a))
+    rests = range(0)
+    if glass is not None:
+        plain, rest = ([(a, b) for a, b in found if min(a.sum(), b.sum()) >= min_area]
+                       for found in _evidence_cuts(region, glass, min_area, close_radius))
+        cuts += plain
+        rests = range(len(cuts), len(cuts) + len(rest))
+        cuts += rest
+    return cuts, rests
+
+
+def _readings_cuts(region: np.ndarray, readings: _RegionReadings, K: np.ndarray, plane: Plane,
+                   min_area: int) -> tuple[tuple[np.ndarray, np.ndarray] | None,
+                                           list[tuple[np.ndarray, np.ndarray]]]:
+    """The cuts only the readings can hold: the footprint cut (:func:`_footprint_cut`, or None)
+    and each thin part hanging off the body (:func:`_attachments`) cut at its bridge."""
+    footprint = _footprint_cut(region, *readings.every, K, plane, FOOTPRINT_APART, min_area)
+    body, thin = _attachments(region, min_area)
+    attached = []
+    if thin and cv2.connectedComponents(body.astype(np.uint8), connectivity=8)[0] == 2:
+        attached = [(a, region & ~a & ~_bridge(region, body, thin, a)) for a in thin]
+    return footprint, attached
+
+
+def _misses(r: _RegionReadings, whole: _Whole, mask: np.ndarray) -> bool:
+    """Whether a fit of the part could hold :data:`OWN_READINGS` of its own readings
+    more than the whole's fit does (see :func:`_holds_own`)."""
+    on_whole = r.own_share(whole.fit, mask)
+    return on_whole is not None and on_whole <= 1 - OWN_READINGS
+
+
+def _holds_own(r: _RegionReadings, whole: _Whole, found, mask: np.ndarray,
+               share: float = OWN_READINGS) -> bool:
+    """Whether the part's fit holds ``share`` of the part's own readings more than the
+    whole's fit does."""
+    on_whole = r.own_share(whole.fit, mask)
+    return on_whole is not None and r.own_share(found, mask) - on_whole >= share
+
+
+def _refuted(r: _RegionReadings, whole: _Whole, fa, a: np.ndarray, fb, b: np.ndarray,
+             on_parts: int) -> bool:
+    """Whether the readings refute a cut into ``a`` and ``b`` (fits ``fa``, ``fb``; with
+    ``on_parts`` readings on them): fewer on the parts than on the whole by the margin, or
+    a part whose fit holds :data:`OUTLINE_REFUTED` fewer of its own readings than the
+    whole's fit does."""
+    if on_parts <= whole.on - whole.margin:
+        return True
+    for found, part in ((fa, a), (fb, b)):
+        mine = r.own_share(found, part)
+        if mine is not None and mine < r.own_share(whole.fit, part) - OUTLINE_REFUTED:
+            return True
+    return False
+
+
+def _refutes_whole(r: _RegionReadings, whole: _Whole, part: np.ndarray) -> bool:
+    """Whether the readings refute the whole's fit on ``part``: :data:`SPLIT_READINGS` of
+    the part's readings (at least ``DEPTH_MIN_POINTS``) stand above it (a standing goblet
+    and a glass beside it drew a lying goblet, 11 cm high, under readings up to 16 cm)."""
+    return r.above(whole.fit, part) >= max(DEPTH_MIN_POINTS, SPLIT_READINGS * r.count_in(part))
+
+
+def _could_hold(reg: _Region, whole: _Whole, outline_may_hold: bool, front: np.ndarray,
+                f_front, back: np.ndarray) -> bool:
+    """Whether a cut could hold with the best fit of ``back`` there can be (IoU 1, all
+    its readings on it): if not, fitting it again with hidden pixels changes nothing.
+    ``outline_may_hold``: the cut is one the outline may hold (not made by the readings)."""
+    if f_front is None:
+        return False
+    r = reg.readings
+    on_front, in_back = 0, 0
+    if r is not None:
+        on_front = r.on_surface(f_front, front)
+        in_back = r.count_in(back)
+    area = front.sum() + back.sum()
+    by_outline = outline_may_hold and f_front.iou > whole.fit.iou and \
+        (f_front.iou * front.sum() + back.sum()) / area >= whole.fit.iou + reg.gain and \
+        (r is None or on_front + in_back > whole.on - whole.margin)
+    return by_outline or (r is not None and f_front.iou >= SPLIT_PART_IOU and (
+        min(on_front, in_back) >= DEPTH_MIN_POINTS and
+        on_front + in_back >= whole.on + whole.margin or
+        on_front >= (1 - SPLIT_READINGS) * r.on_surface(whole.fit, front) and
+        _misses(r, whole, back)))
+
+
+def _fit_parts(reg: _Region, whole: _Whole, outline_may_hold: bool, a: np.ndarray,
+               b: np.ndarray):
+    """Both parts' fits. A part behind the other (:func:`in_front`) is fitted with the
+    other's pixels as hidden, if the cut could then hold, that fit lies behind the other's
+    and its readings bear it out (:data:`HIDDEN_READINGS`); else alone."""
+    r = reg.readings
+    for front, back in ((a, b), (b, a)):
+        if in_front(front, back, reg.down):
+            f_front, f_back = reg.fits(front), reg.fits(back)
+            if _could_hold(reg, whole, outline_may_hold, front, f_front, back):
+                hidden = reg.fits(back, front)
+                if hidden is not None and (f_front is None or stands_behind(
+                        hidden, f_front, front & fit_silhouette(hidden, reg.K, reg.mask.shape),
+                        reg.K, reg.plane)) and (r is None or r.on_surface(hidden, back) >=
+                                                HIDDEN_READINGS * r.count_in(back)):
+                    f_back = hidden
+            return (f_front, f_back) if front is a else (f_back, f_front)
+    return reg.fits(a), reg.fits(b)
+
+
+def _by_readings(r: _RegionReadings, whole: _Whole, gain: float, a, fa, ia: float, sa: int,
+                 b, fb, ib: float, sb: int, mean: float, is_part: bool) -> tuple[bool, bool]:
+    """Whether the readings hold the cut, and whether by the region's count (ranked above the
+    rest); ``ia``, ``ib``: the parts' IoUs, ``sa``, ``sb``: readings on their surfaces,
+    ``mean``: their area-weighted IoU."""
+    w = whole.fit
+    by_count = (min(ia, ib) >= SPLIT_PART_IOU and min(sa, sb) >= DEPTH_MIN_POINTS
+                and sa + sb >= whole.on + whole.margin and (mean >= w.iou or not is_part))
+    # a small part's own readings (ranked below a cut the region's count holds); fewer
+    # of them where the outline gains too
+    own = OWN_READINGS if mean < w.iou + gain else OUTLINE_OWN_READINGS
+    by_readings = by_count or min(ia, ib) >= SPLIT_PART_IOU and mean >= w.iou and \
+        any(_holds_own(r, whole, f, part, own) and s_other >= (1 - SPLIT_READINGS) *
+            r.on_surface(w, other) for f, part, s_other, other in ((fa, a, sb, b), (fb, b, sa, a)))
+    # readings above the whole's fit and above neither part's (the outline may be a
+    # little worse: the whole's fit drew it with a shape the readings rule out)
+    by_readings = by_readings or min(ia, ib) >= SPLIT_PART_IOU and \
+        mean >= w.iou - gain and min(sa, sb) >= DEPTH_MIN_POINTS and \
+        max(r.above(fa, a), r.above(fb, b)) < DEPTH_MIN_POINTS and \
+        (_refutes_whole(r, whole, a) or _refutes_whole(r, whole, b))
+    return by_readings, by_count
+
+
+def _judge_cut(reg: _Region, whole: _Whole, a: np.ndarray, b: np.ndarray, *,
+               outline_may_hold: bool, min_part: float, is_part: bool):
+    """Whether the cut into ``a`` and ``b`` holds (see :func:`split_touching`): None if not,
+    else (by the readings, by the region's count, score, fa, fb). ``outline_may_hold``: the
+    cut is not one only the readings hold; ``min_part``: pixels below which a part of such a
+    cut must fit to :data:`SPLIT_PART_IOU`."""
+    gain, w = reg.gain, whole.fit
+    if not outline_may_hold and not in_front(b, a, reg.down) and \
+            (reg.fits(a) is None or reg.fits(a).iou < SPLIT_PART_IOU):
+        return None  # a thin part that cannot hold by the readings (b need not be fitted)
+    fa, fb = _fit_parts(reg, whole, outline_may_hold, a, b)
+    if not outline_may_hold and (fa is None or fa.iou < SPLIT_PART_IOU):
+        return None
+    ia, ib = (f.iou if f is not None else -1.0 for f in (fa, fb))
+    if outline_may_hold and min(a.sum(), b.sum()) < min_part and min(ia, ib) < SPLIT_PART_IOU:
+        return None  # a small body of evidence no solid draws is a piece of an object
+    mean = (ia * a.sum() + ib * b.sum()) / (a.sum() + b.sum())
+    by_outline = outline_may_hold and min(ia, ib) > w.iou and mean >= w.iou + gain
+    by_readings, by_count, score = False, False, mean
+    r = reg.readings
+    if r is not None:
+        sa, sb = r.on_surface(fa, a), r.on_surface(fb, b)
+        by_readings, by_count = _by_readings(r, whole, gain, a, fa, ia, sa, b, fb, ib, sb, mean,
+                                             is_part)
+        # no cut the readings refute holds by the outline (see :func:`_refuted`), unless
+        # no solid draws the whole and the parts are drawn clearly better
+        clear = w.iou < SPLIT_PART_IOU and mean >= w.iou + CLEAR_GAIN * gain
+        by_outline = by_outline and (clear or not _refuted(r, whole, fa, a, fb, b, sa + sb))
+        score = sa + sb if by_readings else mean
+    if not (by_outline or by_readings):
+        return None
+    return by_readings, by_count, score, fa, fb
+
+
 def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
                    depth: np.ndarray | None = None, glass: np.ndarray | None = None,
                    close_radius: int = 6, max_pieces: int = 4,
@@ -788,212 +1077,40 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     alone, a glass behind a glass stands where the front one's outline crosses it, and its
     readings miss it (seed 2700 frame 22: 24 of them on it, 56 when placed 4% nearer).
     """
-    from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, DEPTH_SAMPLES,
-                                               evenly, fit_revolution, fit_silhouette,
-                                               off_table_readings, raw_support, stands_behind,
-                                               above_top)
-
     if rounds < 1:
         return [region]
     is_part = whole is not None  # of a region already cut
-    labels, n, length = _pieces(region, max_pieces)
     area = float(region.sum())
-    cuts = []
-    for bits in range(1, 2 ** (n - 1)):  # piece n stays in the second part
-        first = [k for k in range(1, n + 1) if bits >> (k - 1) & 1]
-        second = [k for k in range(1, n + 1) if k not in first]
-        if _connected(first, length) and _connected(second, length):
-            a = np.isin(labels, first)
-            if min(a.sum(), area - a.sum()) >= min_share * area:
-                cuts.append((a, region & ~a))
-    rests = range(0)  # cuts of one body's evidence from all the rest: ranked below the others
-    if glass is not None:
-        plain, rest = ([(a, b) for a, b in found if min(a.sum(), b.sum()) >= min_area]
-                       for found in _evidence_cuts(region, glass, min_area, close_radius))
-        cuts += plain
-        rests = range(len(cuts), len(cuts) + len(rest))
-        cuts += rest
-    readings = None
-    if depth is not None:
-        every = off_table_readings(region, depth, K, plane, samples=int(area))
-        readings = evenly(every, DEPTH_SAMPLES)  # as fit_revolution samples them
-        heights = plane.height(unproject(np.column_stack(readings[:2]).astype(np.float64),
-                                         readings[2], K))  # above the table, metres
-        if len(readings[0]) < DEPTH_MIN_POINTS:
-            readings = None
+    cuts, rests = _outline_cuts(region, glass, max_pieces, min_share, min_area, close_radius)
+    readings = None if depth is None else _RegionReadings.of(region, depth, K, plane)
     grouped = len(cuts)  # cuts past this one the readings made: only readings hold them
     footprint = None  # its index; it follows the readings, not the outline: ranked last
     if readings is not None:
-        cut = _footprint_cut(region, *every, K, plane, FOOTPRINT_APART, min_area)
+        cut, attached = _readings_cuts(region, readings, K, plane, min_area)
         if cut is not None:
             footprint = len(cuts)
             cuts.append(cut)
-        body, thin = _attachments(region, min_area)
-        if thin and cv2.connectedComponents(body.astype(np.uint8), connectivity=8)[0] == 2:
-            cuts += [(a, region & ~a & ~_bridge(region, body, thin, a)) for a in thin]
+        cuts += attached
     if not cuts:
         return [region]
-
-    alone = {}  # id of a part's mask: its fit without occluders
-
-    def fit(mask: np.ndarray, occluders: np.ndarray | None = None):
-        if occluders is None and id(mask) in alone:
-            return alone[id(mask)]
-        try:
-            # the near-square lying starts cost a fifth of the segment time (one glass, one
-            # core: .52 -> .64 s per frame) and are for the chosen object's fit, not for a cut
-            found = fit_revolution(mask, K, plane, depth=depth, occluders=occluders,
-                                   square_starts=False)
-        except ValueError:  # a part that cannot stand or lie on the table
-            found = None
-        if occluders is None:
-            alone[id(mask)] = found
-        return found
-
-    down = down_direction(region, K, plane)
-
-    def on_surface(found, mask: np.ndarray) -> int:
-        """How many of the region's readings in ``mask`` lie on the fit's surface."""
-        xs, ys, raw = (r[mask[readings[1], readings[0]]] for r in readings)
-        return 0 if found is None else raw_support(found, xs, ys, raw, K, mask.shape, DEPTH_BAND)
-
-    def readings_in(mask: np.ndarray) -> int:
-        """How many of the region's readings lie in ``mask``."""
-        return int(mask[readings[1], readings[0]].sum())
-
-    def margin() -> float:
-        return max(DEPTH_MIN_POINTS, SPLIT_READINGS * whole_on)
-
-    shares: dict = {}  # own_share's answers for the cut being judged (cleared for each)
-
-    def own_share(found, mask: np.ndarray) -> float | None:
-        """The share of the part's own readings (up to ``DEPTH_SAMPLES`` of them: a small
-        object gets few of the region's sample) on the fit's surface; None with fewer than
-        ``DEPTH_MIN_POINTS``. Each is computed once per cut: the rules below ask for the same
-        fit and part several times."""
-        key = (id(found), id(mask))
-        if key not in shares:  # the fit and the mask are kept with it: their ids stay theirs
-            inside = mask[every[1], every[0]]
-            xs, ys, raw = evenly(tuple(r[inside] for r in every), DEPTH_SAMPLES)
-            share = None if len(xs) < DEPTH_MIN_POINTS else 0.0 if found is None else \
-                raw_support(found, xs, ys, raw, K, mask.shape, DEPTH_BAND) / len(xs)
-            shares[key] = (found, mask, share)
-        return shares[key][2]
-
-    def misses(mask: np.ndarray) -> bool:
-        """Whether a fit of the part could hold :data:`OWN_READINGS` of its own readings
-        more than the whole's fit does (see :func:`holds_own`)."""
-        on_whole = own_share(whole, mask)
-        return on_whole is not None and on_whole <= 1 - OWN_READINGS
-
-    def holds_own(found, mask: np.ndarray, share: float = OWN_READINGS) -> bool:
-        """Whether the part's fit holds ``share`` of the part's own readings more than the
-        whole's fit does."""
-        on_whole = own_share(whole, mask)
-        return on_whole is not None and own_share(found, mask) - on_whole >= share
-
-    def refuted(fa, a: np.ndarray, fb, b: np.ndarray, on_parts: int) -> bool:
-        """Whether the readings refute a cut into ``a`` and ``b`` (fits ``fa``, ``fb``; with
-        ``on_parts`` readings on them): fewer on the parts than on the whole by the margin, or
-        a part whose fit holds :data:`OUTLINE_REFUTED` fewer of its own readings than the
-        whole's fit does."""
-        if on_parts <= whole_on - margin():
-            return True
-        for found, part in ((fa, a), (fb, b)):
-            mine = own_share(found, part)
-            if mine is not None and mine < own_share(whole, part) - OUTLINE_REFUTED:
-                return True
-        return False
-
-    def above(found, mask: np.ndarray) -> int:
-        """How many of the region's readings in ``mask`` stand above the fit (:func:`above_top`)."""
-        return above_top(found, heights[mask[readings[1], readings[0]]], plane, DEPTH_BAND)
-
-    def refutes(part: np.ndarray) -> bool:
-        """Whether the readings refute the whole's fit on ``part``: :data:`SPLIT_READINGS` of
-        the part's readings (at least ``DEPTH_MIN_POINTS``) stand above it (a standing goblet
-        and a glass beside it drew a lying goblet, 11 cm high, under readings up to 16 cm)."""
-        return above(whole, part) >= max(DEPTH_MIN_POINTS, SPLIT_READINGS * readings_in(part))
-
-    def could_hold(i: int, front: np.ndarray, f_front, back: np.ndarray) -> bool:
-        """Whether cut ``i`` could hold with the best fit of ``back`` there can be (IoU 1, all
-        its readings on it): if not, fitting it again with hidden pixels changes nothing."""
-        if f_front is None:
-            return False
-        on_front, in_back = 0, 0
-        if readings is not None:
-            on_front = on_surface(f_front, front)
-            in_back = readings_in(back)
-        area = front.sum() + back.sum()
-        by_outline = i < grouped and f_front.iou > whole.iou and \
-            (f_front.iou * front.sum() + back.sum()) / area >= whole.iou + gain and \
-            (readings is None or on_front + in_back > whole_on - margin())
-        return by_outline or (readings is not None and f_front.iou >= SPLIT_PART_IOU and (
-            min(on_front, in_back) >= DEPTH_MIN_POINTS and
-            on_front + in_back >= whole_on + margin() or
-            on_front >= (1 - SPLIT_READINGS) * on_surface(whole, front) and misses(back)))
-
-    def fit_parts(i: int, a: np.ndarray, b: np.ndarray):
-        """Both parts' fits. A part behind the other (:func:`in_front`) is fitted with the
-        other's pixels as hidden, if the cut could then hold, that fit lies behind the other's
-        and its readings bear it out (:data:`HIDDEN_READINGS`); else alone."""
-        for front, back in ((a, b), (b, a)):
-            if in_front(front, back, down):
-                f_front, f_back = fit(front), fit(back)
-                if could_hold(i, front, f_front, back):
-                    hidden = fit(back, front)
-                    if hidden is not None and (f_front is None or stands_behind(
-                            hidden, f_front, front & fit_silhouette(hidden, K, region.shape),
-                            K, plane)) and (readings is None or on_surface(hidden, back) >=
-                                            HIDDEN_READINGS * readings_in(back)):
-                        f_back = hidden
-                return (f_front, f_back) if front is a else (f_back, f_front)
-        return fit(a), fit(b)
-
-    best, whole_on = None, None  # best: (by readings, score), parts with their fits
+    reg = _Region(region, K, plane, down_direction(region, K, plane), _PartFits(K, plane, depth),
+                  readings, gain)
+    best, judged = None, None  # best: (by readings, score), parts with their fits
     for i, (a, b) in enumerate(cuts):
-        shares.clear()
+        if readings is not None:
+            readings.shares.clear()
         if whole is None:  # fitted once a cut turns up (most regions have none)
-            whole = fit(region)
+            whole = reg.fits(region)
         if whole is None:
             return [region]
-        if readings is not None and whole_on is None:
-            whole_on = on_surface(whole, region)
-        if i >= grouped and not in_front(b, a, down) and \
-                (fit(a) is None or fit(a).iou < SPLIT_PART_IOU):
-            continue  # a thin part that cannot hold by the readings (b need not be fitted)
-        fa, fb = fit_parts(i, a, b)
-        if i >= grouped and (fa is None or fa.iou < SPLIT_PART_IOU):
+        if judged is None:
+            judged = _Whole(whole, None if readings is None else
+                            readings.on_surface(whole, region))
+        held = _judge_cut(reg, judged, a, b, outline_may_hold=i < grouped,
+                          min_part=min_share * area, is_part=is_part)
+        if held is None:
             continue
-        ia, ib = (f.iou if f is not None else -1.0 for f in (fa, fb))
-        if i < grouped and min(a.sum(), b.sum()) < min_share * area and \
-                min(ia, ib) < SPLIT_PART_IOU:
-            continue  # a small body of evidence no solid draws is a piece of an object
-        mean = (ia * a.sum() + ib * b.sum()) / (a.sum() + b.sum())
-        by_outline = i < grouped and min(ia, ib) > whole.iou and mean >= whole.iou + gain
-        by_readings, by_count, score = False, False, mean
-        if readings is not None:
-            sa, sb = on_surface(fa, a), on_surface(fb, b)
-            by_count = (min(ia, ib) >= SPLIT_PART_IOU and min(sa, sb) >= DEPTH_MIN_POINTS
-                        and sa + sb >= whole_on + margin() and (mean >= whole.iou or not is_part))
-            # a small part's own readings (ranked below a cut the region's count holds); fewer
-            # of them where the outline gains too
-            own = OWN_READINGS if mean < whole.iou + gain else OUTLINE_OWN_READINGS
-            by_readings = by_count or min(ia, ib) >= SPLIT_PART_IOU and mean >= whole.iou and \
-                any(holds_own(f, part, own) and s_other >= (1 - SPLIT_READINGS) * on_surface(
-                    whole, other) for f, part, s_other, other in ((fa, a, sb, b), (fb, b, sa, a)))
-            # readings above the whole's fit and above neither part's (the outline may be a
-            # little worse: the whole's fit drew it with a shape the readings rule out)
-            by_readings = by_readings or min(ia, ib) >= SPLIT_PART_IOU and \
-                mean >= whole.iou - gain and min(sa, sb) >= DEPTH_MIN_POINTS and \
-                max(above(fa, a), above(fb, b)) < DEPTH_MIN_POINTS and (refutes(a) or refutes(b))
-            # no cut the readings refute holds by the outline (see :func:`refuted`), unless
-            # no solid draws the whole and the parts are drawn clearly better
-            clear = whole.iou < SPLIT_PART_IOU and mean >= whole.iou + CLEAR_GAIN * gain
-            by_outline = by_outline and (clear or not refuted(fa, a, fb, b, sa + sb))
-            score = sa + sb if by_readings else mean
-        if not (by_outline or by_readings):
-            continue
+        by_readings, by_count, score, fa, fb = held
         key = (by_readings, by_count, i != footprint, i not in rests, score)
         if best is None or key > best[0]:
             best = (key, ((a, fa), (b, fb)))

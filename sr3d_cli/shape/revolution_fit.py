@@ -830,18 +830,171 @@ def _nearer(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, plane: Plane,
     return best
 
 
-def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int = 40,
-                   iterations: int = 12, lying_margin: float = 0.03,
-                   allow_lying: bool = True, depth: np.ndarray | None = None,
-                   depth_band: float = DEPTH_BAND, depth_min_points: int = DEPTH_MIN_POINTS,
-                   depth_vote: float = 2.0, vote_iou_gap: float = 0.06,
-                   axial_view: float = 25.0, axial_iou_gap: float = 0.03,
-                   refute_share: float = 0.25, tilt_tolerance: float = 0.01,
-                   straight_top_gap: float = 0.005,
+@dataclass(frozen=True)
+class FitOptions:
+    """The settings of :func:`fit_revolution` (what each rule is, in its docstring).
+
+    levels : radii along the axis; iterations : fixed-point rounds of each silhouette fit;
+    lying_margin : IoU a lying fit must beat a standing one by; allow_lying : fit lying at all;
+    depth_band : metres within which a reading lies on a surface; depth_min_points : fewest
+    readings that count as evidence; depth_vote : times more readings a hypothesis needs to win
+    by them; vote_iou_gap : IoU within which the readings decide; axial_view : degrees from the
+    axis within which a standing solid is also fitted from the readings; axial_iou_gap : IoU
+    within which that fit is kept; refute_share : share of the readings above a lying fit's top
+    that refutes it; tilt_tolerance : IoU a tilted lying refit may lose; straight_top_gap : IoU a
+    straight-topped refit may lose; square_starts : also start a near-square outline's lying fit
+    across it."""
+
+    levels: int = 40
+    iterations: int = 12
+    lying_margin: float = 0.03
+    allow_lying: bool = True
+    depth_band: float = DEPTH_BAND
+    depth_min_points: int = DEPTH_MIN_POINTS
+    depth_vote: float = 2.0
+    vote_iou_gap: float = 0.06
+    axial_view: float = 25.0
+    axial_iou_gap: float = 0.03
+    refute_share: float = 0.25
+    tilt_tolerance: float = 0.01
+    straight_top_gap: float = 0.005
+    square_starts: bool = True
+
+
+LyingStart = tuple[bool, bool]  # (across the outline's major axis, turned by its orientation)
+
+
+@dataclass
+class _Readings:
+    """The off-table raw readings of a mask, weighed against fits.
+
+    xs, ys : (N,) int pixels; raw : (N,) metres; points : (N, 3) camera frame, metres;
+    heights : (N,) metres above the plane; openings : the open vessels a fit may be rendered
+    as (see :func:`fit_revolution`)."""
+    xs: np.ndarray
+    ys: np.ndarray
+    raw: np.ndarray
+    points: np.ndarray
+    heights: np.ndarray
+    shape: tuple[int, int]
+    K: np.ndarray
+    plane: Plane
+    openings: Callable[[RevolutionFit], list[RevolutionFit]] | None
+
+    @classmethod
+    def of(cls, mask, depth, K, plane, band, openings) -> "_Readings":
+        xs, ys, raw = off_table_readings(mask, depth, K, plane, band)
+        points = unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K)
+        return cls(xs, ys, raw, points, plane.height(points), mask.shape, K, plane, openings)
+
+    def on_surface(self, fit: RevolutionFit, band: float) -> int:
+        """Readings on the surface of the fit or of any of its open forms, the most of them."""
+        forms = [fit, *(self.openings(fit) if self.openings is not None else [])]
+        return max(raw_support(f, self.xs, self.ys, self.raw, self.K, self.shape, band)
+                   for f in forms)
+
+    def refutes(self, fit: RevolutionFit, opts: FitOptions) -> bool:
+        """Enough readings lie above the fit's highest point to rule it out."""
+        return above_top(fit, self.heights, self.plane, opts.depth_band) >= \
+            max(opts.depth_min_points, opts.refute_share * len(self.points))
+
+
+def _refuted(readings: _Readings | None, fit: RevolutionFit, opts: FitOptions) -> bool:
+    """:meth:`_Readings.refutes`, never without readings."""
+    return readings is not None and readings.refutes(fit, opts)
+
+
+def _lying_starts(mask: np.ndarray, occluders: np.ndarray | None,
+                  opts: FitOptions) -> list[LyingStart]:
+    """The lying fit's starts: along the major axis, turning. A near-square outline's major axis
+    and orientation say nothing of a lying solid's axis (a beaker as long as it is wide), so
+    there it starts both ways, turned or not; not where an object in front may cut the outline
+    (the top of a glass behind another, a near-square that a lying fit drew better than the
+    standing one, which the readings then chose)."""
+    square = opts.square_starts and _principal(mask)[2] < SQUARE_OUTLINE and \
+        (occluders is None or not occluders.any())
+    return [(False, True)] + ([(True, True), (True, False), (False, False)] if square else [])
+
+
+def _outline_fit(resting: str, starts: list[LyingStart], mask, K, plane, occluders,
+                 opts: FitOptions) -> tuple[_Model, float, LyingStart] | None:
+    """The best silhouette fit of one resting hypothesis over its starts: (model, IoU, the
+    start it won from), or None when no start can be set up."""
+    tried = []
+    for across, turn in starts:
+        model = _init_lying(mask, K, plane, opts.levels, across) if resting == "lying" else \
+            _init_standing(mask, K, plane, opts.levels)
+        if model is not None:
+            tried.append((*_fit(model, mask, K, plane, resting, opts.iterations,
+                                occluders=occluders, turn=turn), (across, turn)))
+    if not tried:
+        return None
+    return max(tried, key=lambda t: t[1])
+
+
+def _straight_top_kept(fit: RevolutionFit, model: _Model, mask, K, plane, occluders,
+                       readings: _Readings | None, opts: FitOptions) -> RevolutionFit:
+    """The standing fit refitted with its hidden top levels straight
+    (:func:`_straight_top`) if within ``straight_top_gap`` IoU and not refuted; else ``fit``."""
+    straight = _straight_top(model, mask, K, plane, opts.iterations, occluders)
+    if straight is not None and straight[1] >= fit.iou - opts.straight_top_gap:
+        candidate = _result(straight[0], "standing", straight[1])
+        if not _refuted(readings, candidate, opts):
+            return candidate
+    return fit
+
+
+def _axial_kept(fit: RevolutionFit, mask, K, plane, readings: _Readings,
+                opts: FitOptions) -> tuple[RevolutionFit, int]:
+    """The readings' fit (:func:`_fit_axial`) replaces the outline's if more readings lie on its
+    surface and it is within ``axial_iou_gap`` IoU (off the axis, a flask's neck shifts against
+    its body and the outline fit wins). Returns the fit and the readings on its surface."""
+    count = readings.on_surface(fit, opts.depth_band)
+    down = _fit_axial(mask, K, plane, readings.points, opts.levels, opts.depth_band,
+                      opts.depth_min_points)
+    down_count = readings.on_surface(down, opts.depth_band) if down is not None else -1
+    if down_count > count and down.iou >= fit.iou - opts.axial_iou_gap:
+        return down, down_count
+    return fit, count
+
+
+def _by_readings(fits: list[tuple[float, RevolutionFit, int | None]], readings: _Readings,
+                 opts: FitOptions) -> RevolutionFit | None:
+    """Standing (fits[0]) against lying (fits[1]) by the readings: a refuted lying fit loses to
+    an unrefuted standing one; else, with the IoUs within ``vote_iou_gap``, the one with
+    ``depth_vote`` times more readings on its surface (at least ``depth_min_points``) wins.
+    None when the readings do not decide."""
+    support = [readings.on_surface(f, opts.depth_band) if count is None else count
+               for _, f, count in fits]
+    lo, hi = sorted(support)
+    close = abs(fits[0][1].iou - fits[1][1].iou) <= opts.vote_iou_gap
+    if readings.refutes(fits[1][1], opts) and not readings.refutes(fits[0][1], opts):
+        return fits[0][1]  # readings high above a lying fit: it stands
+    if close and hi >= opts.depth_min_points and hi >= opts.depth_vote * lo:
+        return fits[int(np.argmax(support))][1]
+    return None
+
+
+def _tilted(best: RevolutionFit, start: LyingStart, mask, K, plane, occluders,
+            opts: FitOptions) -> RevolutionFit:
+    """A lying winner refitted resting on its hull, tilted, from its own start (the flat fit's
+    radii hold the tilt as a taper), kept if within ``tilt_tolerance`` IoU. Decided flat: a
+    tilt would let the lying fit take short standing vessels."""
+    model = _init_lying(mask, K, plane, opts.levels, start[0])
+    if model is None:
+        return best
+    model, iou = _fit(model, mask, K, plane, "lying", opts.iterations, tilt=True,
+                      occluders=occluders, turn=start[1])
+    return _result(model, "lying", iou) if iou >= best.iou - opts.tilt_tolerance else best
+
+
+def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *,
+                   depth: np.ndarray | None = None,
                    openings: Callable[[RevolutionFit], list[RevolutionFit]] | None = None,
                    occluders: np.ndarray | None = None,
-                   square_starts: bool = True) -> RevolutionFit:
-    """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``.
+                   options: FitOptions = FitOptions()) -> RevolutionFit:
+    """Fit a solid of revolution to ``mask (H, W) bool`` seen by a camera ``K`` above ``plane``;
+    the settings named below are the fields of ``options`` (:class:`FitOptions`).
 
     Standing and lying are both fitted; the better silhouette wins, lying only by
     ``lying_margin`` IoU. Seen from above, a tall standing bottle and a short lying one can draw
@@ -886,87 +1039,40 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *, levels: int
 
     Raises ValueError when neither hypothesis can be set up (e.g. the mask is above the horizon).
     """
-    readings = None
-    if depth is not None:
-        xs, ys, raw = off_table_readings(mask, depth, K, plane, depth_band)
-        readings = unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K)
-        heights = plane.height(readings)
-    axial = readings is not None and axial_view_angle(mask, K, plane) < axial_view
-
-    def on_surface(fit: RevolutionFit) -> int:
-        forms = [fit, *(openings(fit) if openings is not None else [])]
-        return max(raw_support(f, xs, ys, raw, K, mask.shape, depth_band) for f in forms)
-
-    def refuted(fit: RevolutionFit) -> bool:
-        """Enough readings lie above the fit's highest point to rule it out."""
-        if readings is None:
-            return False
-        return above_top(fit, heights, plane, depth_band) >= \
-            max(depth_min_points, refute_share * len(readings))
-
-    # (across the major axis, turned by the outline's orientation) of each lying start: a
-    # near-square outline's major axis and orientation say nothing of a lying solid's axis
-    # (a beaker as long as it is wide), so there it starts both ways, turned or not; not where
-    # an object in front may cut the outline (the top of a glass behind another, a near-square
-    # that a lying fit drew better than the standing one, which the readings then chose)
-    square = square_starts and _principal(mask)[2] < SQUARE_OUTLINE and \
-        (occluders is None or not occluders.any())
-    lying_starts = [(False, True)] + ([(True, True), (True, False), (False, False)] if square
-                                      else [])
+    opts = options
+    readings = None if depth is None else \
+        _Readings.of(mask, depth, K, plane, opts.depth_band, openings)
+    axial = readings is not None and axial_view_angle(mask, K, plane) < opts.axial_view
+    lying_starts = _lying_starts(mask, occluders, opts)
     lying_start = lying_starts[0]  # the one the lying fit won from (its tilted refit's too)
     fits = []  # (score, fit, readings on its surface when already counted)
-    for resting in ("standing", "lying"):
-        if resting == "lying" and not allow_lying:
+    for resting in ("standing", "lying") if opts.allow_lying else ("standing",):
+        found = _outline_fit(resting, lying_starts if resting == "lying" else [(False, True)],
+                             mask, K, plane, occluders, opts)
+        if found is None:
             continue
-        tried = []
-        for across, turn in (lying_starts if resting == "lying" else [(False, True)]):
-            model = _init_lying(mask, K, plane, levels, across) if resting == "lying" else \
-                _init_standing(mask, K, plane, levels)
-            if model is not None:
-                tried.append((*_fit(model, mask, K, plane, resting, iterations,
-                                    occluders=occluders, turn=turn), (across, turn)))
-        if not tried:
-            continue
-        model, iou, start = max(tried, key=lambda t: t[1])
+        model, iou, start = found
+        fit, count = _result(model, resting, iou), None
         if resting == "lying":
             lying_start = start
-        fit, count = _result(model, resting, iou), None
-        if resting == "standing":
-            straight = _straight_top(model, mask, K, plane, iterations, occluders)
-            if straight is not None and straight[1] >= iou - straight_top_gap:
-                candidate = _result(straight[0], resting, straight[1])
-                if not refuted(candidate):
-                    fit = candidate
-        if axial and resting == "standing":
-            # the readings' fit replaces the outline's if more readings lie on its surface
-            # (off the axis, a flask's neck shifts against its body and the outline fit wins)
-            count = on_surface(fit)
-            down = _fit_axial(mask, K, plane, readings, levels, depth_band, depth_min_points)
-            down_count = on_surface(down) if down is not None else -1
-            if down_count > count and down.iou >= fit.iou - axial_iou_gap:
-                fit, count = down, down_count
-        fits.append((fit.iou + (lying_margin if resting == "standing" else 0.0), fit, count))
+        else:
+            fit = _straight_top_kept(fit, model, mask, K, plane, occluders, readings, opts)
+            if axial:
+                fit, count = _axial_kept(fit, mask, K, plane, readings, opts)
+        fits.append((fit.iou + (opts.lying_margin if resting == "standing" else 0.0), fit,
+                     count))
     if not fits:
         raise ValueError("the mask does not meet the support plane: cannot place an object")
     best = max(fits, key=lambda f: f[0])[1]
     if readings is not None and len(fits) == 2:
-        support = [on_surface(f) if count is None else count for _, f, count in fits]
-        lo, hi = sorted(support)
-        close = abs(fits[0][1].iou - fits[1][1].iou) <= vote_iou_gap
-        if refuted(fits[1][1]) and not refuted(fits[0][1]):  # fits: standing, then lying
-            best = fits[0][1]  # readings high above a lying fit: it stands
-        elif close and hi >= depth_min_points and hi >= depth_vote * lo:
-            best = fits[int(np.argmax(support))][1]
+        decided = _by_readings(fits, readings, opts)
+        best = best if decided is None else decided
     if best.resting == "lying":
-        # decided flat (a tilt would let the lying fit take short standing vessels); from its
-        # own start, since the flat fit's radii hold the tilt as a taper
-        start = _init_lying(mask, K, plane, levels, lying_start[0])
-        if start is not None:
-            model, iou = _fit(start, mask, K, plane, "lying", iterations, tilt=True,
-                              occluders=occluders, turn=lying_start[1])
-            if iou >= best.iou - tilt_tolerance:
-                best = _result(model, "lying", iou)
+        best = _tilted(best, lying_start, mask, K, plane, occluders, opts)
     if readings is not None and occluders is not None and best.resting == "standing":
-        best = _nearer(best, mask, K, plane, iterations, occluders, on_surface,
-                       max(depth_min_points, depth_vote * on_surface(best)), vote_iou_gap)
+        def on_surface(fit: RevolutionFit) -> int:
+            return readings.on_surface(fit, opts.depth_band)
+        best = _nearer(best, mask, K, plane, opts.iterations, occluders, on_surface,
+                       max(opts.depth_min_points, opts.depth_vote * on_surface(best)),
+                       opts.vote_iou_gap)
     return straightened(best, mask, K, occluders=occluders)
