@@ -100,6 +100,14 @@ class Candidate:
     score: float
 
 
+def joined_to(region: np.ndarray, seeds: np.ndarray) -> np.ndarray:
+    """The 8-connected components of ``region`` ``(H, W) bool`` that hold a pixel of ``seeds``
+    ``(H, W) bool``."""
+    count, labels = cv2.connectedComponents(region.astype(np.uint8), connectivity=8)
+    keep = np.unique(labels[seeds & region])
+    return np.isin(labels, keep[keep > 0])
+
+
 def _disk(radius: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
@@ -273,9 +281,7 @@ def grow_to_outline(mask: np.ndarray, outline: np.ndarray, *, close_radius: int,
     grown = ndimage.binary_fill_holes(grown)
     if barred is not None:
         grown &= ~barred
-    count, labels = cv2.connectedComponents(grown.astype(np.uint8), connectivity=8)
-    keep = np.unique(labels[mask & grown])
-    return np.isin(labels, keep[keep > 0])
+    return joined_to(grown, mask)
 
 
 @dataclass
@@ -342,12 +348,8 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, *, min_a
     to one at least :data:`BODY_SEED_HEIGHT` high (the table's own bumps never reach that),
     closed and filled, at least ``min_area`` pixels and :data:`BODY_HEIGHT` tall.
     """
-    count, labels = cv2.connectedComponents(ev.above.astype(np.uint8), connectivity=8)
-    seeded = np.zeros(count, bool)
-    seeded[labels[ev.above & (ev.height > BODY_SEED_HEIGHT)]] = True
-    seeded[0] = False
-    body = cv2.morphologyEx(seeded[labels].astype(np.uint8), cv2.MORPH_CLOSE,
-                            _disk(close_radius)) > 0
+    seeded = joined_to(ev.above, ev.height > BODY_SEED_HEIGHT)
+    body = cv2.morphologyEx(seeded.astype(np.uint8), cv2.MORPH_CLOSE, _disk(close_radius)) > 0
     body = ndimage.binary_fill_holes(body)
     count, labels = cv2.connectedComponents(body.astype(np.uint8), connectivity=8)
     if count < 2:
@@ -487,10 +489,7 @@ def grabcut_refine(rgb: np.ndarray, candidate: np.ndarray, opaque: np.ndarray, *
     # GrabCut may only add to the depth candidate (it is the high-precision part)
     fg = np.isin(gc, (cv2.GC_FGD, cv2.GC_PR_FGD)) | (cand > 0)
     fg = ndimage.binary_fill_holes(fg)
-    # keep the component(s) overlapping the candidate
-    count, labels = cv2.connectedComponents(fg.astype(np.uint8), connectivity=8)
-    keep = np.unique(labels[(cand > 0) & fg])
-    fg = np.isin(labels, keep[keep > 0])
+    fg = joined_to(fg, cand > 0)  # the component(s) overlapping the candidate
     out = np.zeros_like(candidate)
     out[y0:y1, x0:x1] = fg
     return out
@@ -559,10 +558,7 @@ def within_table_columns(mask: np.ndarray, footprint: np.ndarray,
     columns = inside.any(axis=0)
     columns = cv2.dilate(columns.astype(np.uint8)[None, :], np.ones((1, 2 * margin + 1), np.uint8)
                          )[0] > 0
-    kept = mask & (footprint | columns[None, :])
-    count, labels = cv2.connectedComponents(kept.astype(np.uint8), connectivity=8)
-    keep = np.unique(labels[inside & kept])
-    return np.isin(labels, keep[keep > 0])
+    return joined_to(mask & (footprint | columns[None, :]), inside)
 
 
 def _without_overlaps(found: list[Candidate]) -> list[Candidate]:
