@@ -939,15 +939,28 @@ def _could_hold(reg: _Region, whole: _Whole, outline_may_hold: bool, front: np.n
         _misses(r, whole, back)))
 
 
+def _part_may_hold(found, whole: _Whole, outline_may_hold: bool) -> bool:
+    """Whether a cut one of whose parts is fitted as ``found`` (None: no fit) may still hold
+    (:func:`_judge_cut`): by the outline both parts' IoUs must exceed the whole's, by the
+    readings both must reach :data:`SPLIT_PART_IOU`."""
+    iou = found.iou if found is not None else -1.0
+    return iou >= SPLIT_PART_IOU or (outline_may_hold and iou > whole.fit.iou)
+
+
 def _fit_parts(reg: _Region, whole: _Whole, outline_may_hold: bool, a: np.ndarray,
                b: np.ndarray):
-    """Both parts' fits. A part behind the other (:func:`in_front`) is fitted with the
-    other's pixels as hidden, if the cut could then hold, that fit lies behind the other's
-    and its readings bear it out (:data:`HIDDEN_READINGS`); else alone."""
+    """Both parts' fits, or None where the first part fitted rules the cut out
+    (:func:`_part_may_hold`; the other part is then not fitted). A part behind the other
+    (:func:`in_front`) is fitted with the other's pixels as hidden, if the cut could then
+    hold, that fit lies behind the other's and its readings bear it out
+    (:data:`HIDDEN_READINGS`); else alone."""
     r = reg.readings
     for front, back in ((a, b), (b, a)):
         if in_front(front, back, reg.down):
-            f_front, f_back = reg.fits(front), reg.fits(back)
+            f_front = reg.fits(front)
+            if not _part_may_hold(f_front, whole, outline_may_hold):
+                return None
+            f_back = reg.fits(back)
             if _could_hold(reg, whole, outline_may_hold, front, f_front, back):
                 hidden = reg.fits(back, front)
                 if hidden is not None and (f_front is None or stands_behind(
@@ -956,7 +969,8 @@ def _fit_parts(reg: _Region, whole: _Whole, outline_may_hold: bool, a: np.ndarra
                                                 HIDDEN_READINGS * r.count_in(back)):
                     f_back = hidden
             return (f_front, f_back) if front is a else (f_back, f_front)
-    return reg.fits(a), reg.fits(b)
+    fa = reg.fits(a)
+    return (fa, reg.fits(b)) if _part_may_hold(fa, whole, outline_may_hold) else None
 
 
 def _by_readings(r: _RegionReadings, whole: _Whole, gain: float, a, fa, ia: float, sa: int,
@@ -992,7 +1006,10 @@ def _judge_cut(reg: _Region, whole: _Whole, a: np.ndarray, b: np.ndarray, *,
     if not outline_may_hold and not in_front(b, a, reg.down) and \
             (reg.fits(a) is None or reg.fits(a).iou < SPLIT_PART_IOU):
         return None  # a thin part that cannot hold by the readings (b need not be fitted)
-    fa, fb = _fit_parts(reg, whole, outline_may_hold, a, b)
+    fitted = _fit_parts(reg, whole, outline_may_hold, a, b)
+    if fitted is None:
+        return None
+    fa, fb = fitted
     if not outline_may_hold and (fa is None or fa.iou < SPLIT_PART_IOU):
         return None
     ia, ib = (f.iou if f is not None else -1.0 for f in (fa, fb))
