@@ -83,6 +83,28 @@ def test_silhouette_rows_are_a_pixel_wider_than_the_covered_centres(r):
     assert (extra >= 0).all()
 
 
+def test_the_fits_fast_helpers_give_numpys_exact_numbers():
+    """cross3, _pixels and _extent stand in for np.cross, np.nonzero and the mean of the
+    pixels' columns in the fit's inner loop: the fits' decisions turn on the last bit, so
+    they must agree to it."""
+    from sr3d_cli.geometry.transforms import cross3
+
+    rng = np.random.default_rng(3)
+    for a, b in rng.normal(size=(200, 2, 3)):
+        assert np.array_equal(cross3(a, b), np.cross(a, b))
+    for k in range(20):
+        mask = cv2.GaussianBlur(rng.random((90, 120)), (0, 0), 6) > 0.5 + 0.01 * k
+        if not mask.any():
+            continue
+        ys, xs = revolution_fit._pixels(mask)
+        assert all(np.array_equal(p, q) and p.dtype == q.dtype
+                   for p, q in zip((ys, xs), np.nonzero(mask)))
+        top, bottom, column = revolution_fit._extent(mask)
+        assert (top, bottom) == (ys.min(), ys.max())
+        assert column == float(xs.mean())
+    assert revolution_fit._pixels(np.zeros((5, 5), bool))[0].size == 0
+
+
 @pytest.mark.parametrize("elevation", [30.0, 60.0])
 def test_standing_cylinder_recovered(elevation):
     plane = _table(elevation, 0.6)

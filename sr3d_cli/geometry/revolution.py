@@ -12,6 +12,8 @@ import cv2
 import numpy as np
 import trimesh
 
+from sr3d_cli.geometry.transforms import cross3
+
 
 def revolve(profile: np.ndarray, sections: int = 48) -> trimesh.Trimesh:
     """Revolve a ``(n, 2)`` (r, z) polyline about the z axis; both ends must have r == 0.
@@ -116,9 +118,9 @@ def silhouette(centres: np.ndarray, axis: np.ndarray, radii: np.ndarray, K: np.n
     """
     axis = np.asarray(axis, dtype=np.float64)
     helper = np.array([1.0, 0, 0]) if abs(axis[0]) < 0.9 else np.array([0, 1.0, 0])
-    u = np.cross(axis, helper)
+    u = cross3(axis, helper)
     u /= np.linalg.norm(u)
-    v = np.cross(axis, u)
+    v = cross3(axis, u)
     theta = np.linspace(0, 2 * np.pi, n_theta, endpoint=False)
     ring = np.cos(theta)[:, None] * u + np.sin(theta)[:, None] * v  # (T, 3)
     pts = centres[:, None, :] + radii[:, None, None] * ring[None]  # (L, T, 3)
