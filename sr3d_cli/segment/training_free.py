@@ -108,6 +108,21 @@ def joined_to(region: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     return np.isin(labels, keep[keep > 0])
 
 
+def fill_holes(mask: np.ndarray) -> np.ndarray:
+    """``ndimage.binary_fill_holes(mask)`` of a 2-D mask ``(H, W)`` (bool, or 0 / non-zero),
+    the same pixels, filled within the box of its set pixels widened by one: all outside that
+    box is background joined to the image's border. An object's region is a small part of
+    the frame."""
+    mask = np.asarray(mask, bool)
+    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
+    out = np.zeros(mask.shape, bool)
+    y0, x0 = max(y - 1, 0), max(x - 1, 0)
+    y1, x1 = min(y + h + 1, mask.shape[0]), min(x + w + 1, mask.shape[1])
+    if w > 0:
+        out[y0:y1, x0:x1] = ndimage.binary_fill_holes(mask[y0:y1, x0:x1])
+    return out
+
+
 def _disk(radius: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
@@ -278,7 +293,7 @@ def grow_to_outline(mask: np.ndarray, outline: np.ndarray, *, close_radius: int,
     near = cv2.dilate(mask.astype(np.uint8), _disk(reach)) > 0
     grown = mask | (near & outline)
     grown = cv2.morphologyEx(grown.astype(np.uint8), cv2.MORPH_CLOSE, _disk(close_radius)) > 0
-    grown = ndimage.binary_fill_holes(grown)
+    grown = fill_holes(grown)
     if barred is not None:
         grown &= ~barred
     return joined_to(grown, mask)
@@ -688,7 +703,7 @@ def _evidence_cuts(region: np.ndarray, glass: np.ndarray, min_area: int, close_r
     for k in big:
         body = cv2.morphologyEx((labels == k).astype(np.uint8), cv2.MORPH_CLOSE,
                                 _disk(close_radius))
-        parts.append(region & (nearest == k) & ndimage.binary_fill_holes(body))
+        parts.append(region & (nearest == k) & fill_holes(body))
     rest = [(a, region & (nearest != k)) for a, k in zip(parts, big)]
     if len(parts) == 2:
         return [(parts[0], parts[1])], rest
@@ -1151,7 +1166,7 @@ def merge_pieces(pieces: list[np.ndarray], shape: tuple[int, int], *, radius: in
     for k in range(1, count):
         region = (union > 0) & (labels == k)
         region = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_CLOSE, _disk(radius)) > 0
-        region = ndimage.binary_fill_holes(region) & ~taken
+        region = fill_holes(region) & ~taken
         taken |= region
         out.append(region)
     return out

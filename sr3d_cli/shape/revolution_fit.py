@@ -151,7 +151,10 @@ def _box(mask: np.ndarray, occluders: np.ndarray | None = None) -> tuple[int, in
 
 
 def _pixels(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``np.nonzero(mask)`` of a 2-D mask, the same arrays, listed within the mask's box."""
+    """``np.nonzero(mask)`` of a 2-D mask, the same arrays, listed within the box of a bool
+    mask's set pixels."""
+    if mask.dtype != bool:
+        return np.nonzero(mask)
     x, y, w, h = _box(mask)
     ys, xs = np.nonzero(mask[y:y + h, x:x + w])
     return ys + y, xs + x
@@ -381,7 +384,7 @@ def _rest_on_hull(model: _Model, plane: Plane) -> None:
 
 def _principal(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Centroid (2,), unit major direction (2,) and elongation of a mask's pixels."""
-    ys, xs = np.nonzero(mask)
+    ys, xs = _pixels(mask)
     pts = np.column_stack([xs, ys]).astype(np.float64)
     centre = pts.mean(0)
     evals, evecs = np.linalg.eigh(np.cov((pts - centre).T))
@@ -396,7 +399,7 @@ def _init_standing(mask, K, plane, levels) -> _Model | None:
     n = plane.normal
     up = project(np.stack([p, p + 0.05 * n]), K)
     up = unit(up[1] - up[0])
-    ys, xs = np.nonzero(mask)
+    ys, xs = _pixels(mask)
     along = xs * up[0] + ys * up[1]
     low = along <= along.min() + 1.5
     bottom = np.array([xs[low].mean(), ys[low].mean()])
@@ -420,7 +423,7 @@ def _init_lying(mask, K, plane, levels, across_major: bool = False) -> _Model | 
     centre, major, _ = _principal(mask)
     if across_major:
         major = np.array([-major[1], major[0]])
-    ys, xs = np.nonzero(mask)
+    ys, xs = _pixels(mask)
     along = (xs - centre[0]) * major[0] + (ys - centre[1]) * major[1]
     across = -(xs - centre[0]) * major[1] + (ys - centre[1]) * major[0]
     mid = plane.intersect(_ray(centre, K))
@@ -545,7 +548,7 @@ def carved(fit: RevolutionFit, mask: np.ndarray, depth: np.ndarray, K: np.ndarra
     top too high (by 17 mm on average against 12 mm with the cone)."""
     if fit.resting != "standing":
         return fit
-    ys, xs = np.nonzero(mask & (depth > 0))
+    ys, xs = _pixels(mask & (depth > 0))
     xs, ys, raw = evenly((xs, ys, depth[ys, xs].astype(np.float64)), CARVE_SAMPLES)
     front = fit_depth(fit, xs, ys, K, mask.shape)
     hit = np.isfinite(front)
@@ -614,7 +617,7 @@ def off_table_readings(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, plane
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixels (xs, ys) and raw depth of the mask's readings more than ``band`` above the table
     (those on it are see-through readings), at most ``samples`` of them, evenly spread."""
-    ys, xs = np.nonzero(mask & (depth > 0))
+    ys, xs = _pixels(mask & (depth > 0))
     z = depth[ys, xs].astype(np.float64)
     pts = unproject(np.column_stack([xs, ys]).astype(np.float64), z, K)
     keep = plane.height(pts) > band
@@ -666,7 +669,7 @@ def stands_behind(back: RevolutionFit, front: RevolutionFit, pixels: np.ndarray,
              for f in (back, front)]  # from the camera's foot on the table
     if reach[0] < reach[1] - tolerance:
         return False
-    ys, xs = np.nonzero(pixels)
+    ys, xs = _pixels(pixels)
     if len(xs) == 0:
         return True
     pick = np.linspace(0, len(xs) - 1, min(len(xs), samples)).astype(np.int64)
@@ -751,7 +754,7 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
         if not sil.any() or it == iterations:
             break
         widest *= float(np.clip(np.sqrt(area / sil.sum()), 0.8, 1.25))
-        ys, xs = np.nonzero(sil)
+        ys, xs = _pixels(sil)
         gap = centre_px - np.array([xs.mean(), ys.mean()])
         at = base + 0.5 * height * n  # the silhouette's centre lies between base and top
         J = np.column_stack([(project((at + 0.005 * e)[None], K)[0] - project(at[None], K)[0])
