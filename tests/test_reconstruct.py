@@ -83,6 +83,19 @@ def test_silhouette_rows_are_a_pixel_wider_than_the_covered_centres(r):
     assert (extra >= 0).all()
 
 
+def test_a_revolved_profile_has_outward_normals_whichever_way_it_runs():
+    """revolve orients the faces by the sign of the volume: a profile listed base to top or
+    top to base, closed or an open vessel's, gives a positive volume near the solid's."""
+    r, h = 0.03, 0.1
+    cylinder = np.array([[0, 0], [r, 0], [r, h], [0, h]])
+    vessel = open_vessel([(0, 0), (r, 0), (r, h)], 0.002, 0.004)
+    for profile in (cylinder, cylinder[::-1], vessel, vessel[::-1]):
+        mesh = revolve(profile, 48)
+        assert mesh.is_watertight and mesh.is_winding_consistent
+        assert mesh.volume > 0
+    assert revolve(cylinder, 48).volume == pytest.approx(np.pi * r ** 2 * h, rel=0.01)
+
+
 def test_the_fits_fast_helpers_give_numpys_exact_numbers():
     """cross3, _pixels and _extent stand in for np.cross, np.nonzero and the mean of the
     pixels' columns in the fit's inner loop: the fits' decisions turn on the last bit, so
