@@ -83,6 +83,41 @@ def test_silhouette_rows_are_a_pixel_wider_than_the_covered_centres(r):
     assert (extra >= 0).all()
 
 
+def test_a_revolved_profile_has_outward_normals_whichever_way_it_runs():
+    """revolve orients the faces by the sign of the volume: a profile listed base to top or
+    top to base, closed or an open vessel's, gives a positive volume near the solid's."""
+    r, h = 0.03, 0.1
+    cylinder = np.array([[0, 0], [r, 0], [r, h], [0, h]])
+    vessel = open_vessel([(0, 0), (r, 0), (r, h)], 0.002, 0.004)
+    for profile in (cylinder, cylinder[::-1], vessel, vessel[::-1]):
+        mesh = revolve(profile, 48)
+        assert mesh.is_watertight and mesh.is_winding_consistent
+        assert mesh.volume > 0
+    assert revolve(cylinder, 48).volume == pytest.approx(np.pi * r ** 2 * h, rel=0.01)
+
+
+def test_the_fits_fast_helpers_give_numpys_exact_numbers():
+    """cross3, _pixels and _extent stand in for np.cross, np.nonzero and the mean of the
+    pixels' columns in the fit's inner loop: the fits' decisions turn on the last bit, so
+    they must agree to it."""
+    from sr3d_cli.geometry.transforms import cross3
+
+    rng = np.random.default_rng(3)
+    for a, b in rng.normal(size=(200, 2, 3)):
+        assert np.array_equal(cross3(a, b), np.cross(a, b))
+    for k in range(20):
+        mask = cv2.GaussianBlur(rng.random((90, 120)), (0, 0), 6) > 0.5 + 0.01 * k
+        if not mask.any():
+            continue
+        ys, xs = revolution_fit._pixels(mask)
+        assert all(np.array_equal(p, q) and p.dtype == q.dtype
+                   for p, q in zip((ys, xs), np.nonzero(mask)))
+        top, bottom, column = revolution_fit._extent(mask)
+        assert (top, bottom) == (ys.min(), ys.max())
+        assert column == float(xs.mean())
+    assert revolution_fit._pixels(np.zeros((5, 5), bool))[0].size == 0
+
+
 @pytest.mark.parametrize("elevation", [30.0, 60.0])
 def test_standing_cylinder_recovered(elevation):
     plane = _table(elevation, 0.6)

