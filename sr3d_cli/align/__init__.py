@@ -24,7 +24,8 @@ from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candida
 from sr3d_cli.config import AlignConfig
 from sr3d_cli.geometry.camera import unproject
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.silhouette import fill_silhouette, mask_iou, project_mesh, surface_depth
+from sr3d_cli.geometry.silhouette import (face_twins, fill_silhouette, mask_iou, project_mesh,
+                                          surface_depth)
 from sr3d_cli.geometry.transforms import make_T, rotation_about, unit
 
 
@@ -117,17 +118,20 @@ class _Subject:
     """The arrays one placement works on.
 
     K : (3, 3) float intrinsics (pixels); verts : (V, 3) float64 mesh vertices, object frame
-    (unit size: ``scale`` makes metres); faces : (F, 3) int; mask_px : (N, 2) float64 pixel
-    (x, y) of every mask pixel."""
+    (unit size: ``scale`` makes metres); faces : (F, 3) int; twins : (F, 3) int, the face
+    across each edge (:func:`face_twins`, for drawing silhouettes); mask_px : (N, 2) float64
+    pixel (x, y) of every mask pixel."""
     K: np.ndarray
     verts: np.ndarray
     faces: np.ndarray
+    twins: np.ndarray
     mask_px: np.ndarray
 
     @classmethod
     def of(cls, mesh: trimesh.Trimesh, mask: np.ndarray, K: np.ndarray) -> "_Subject":
         ys, xs = np.nonzero(mask)
-        return cls(K, np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces),
+        faces = np.asarray(mesh.faces)
+        return cls(K, np.asarray(mesh.vertices, dtype=np.float64), faces, face_twins(faces),
                    np.column_stack([xs, ys]).astype(np.float64))
 
 
@@ -219,7 +223,8 @@ class Aligner:
     @staticmethod
     def _silhouette(sub: _Subject, R, t, scale, window: _Window) -> np.ndarray:
         uv, _ = project_mesh(sub.verts, R, t, scale, sub.K)
-        return fill_silhouette(uv, sub.faces, window.shape, window.origin, window.zoom)
+        return fill_silhouette(uv, sub.faces, window.shape, window.origin, window.zoom,
+                               sub.twins)
 
     # ---- keypoint matching ---------------------------------------------------------------------
     @staticmethod
@@ -519,7 +524,7 @@ class Aligner:
         s0 = self._size_guess(sub, R, p.anchor, p.plane, p.extent_px)
         t0 = self._rest_translation(sub, R, s0, p.anchor, p.plane)
         view, _ = p.matcher.render_and_score(sub.verts, sub.faces, R, t0, s0, sub.K,
-                                             p.window.spec)
+                                             p.window.spec, sub.twins)
         prior = 0.0 if p.plain else self._upright_prior(R, p.plane)
         return _Seed(view.total + prior, prior, group, i, R, s0, t0, view)
 
@@ -534,7 +539,8 @@ class Aligner:
         T_h, s_h = np.asarray(hint[0], dtype=np.float64), float(hint[1])
         p.renders += 1
         view, _ = p.matcher.render_and_score(p.subject.verts, p.subject.faces, T_h[:3, :3],
-                                             T_h[:3, 3], s_h, p.subject.K, p.window.spec)
+                                             T_h[:3, 3], s_h, p.subject.K, p.window.spec,
+                                             p.subject.twins)
         return [_Seed(view.total, self._upright_prior(T_h[:3, :3], p.plane), "hint", -1,
                       T_h[:3, :3], s_h, T_h[:3, 3], view)]
 

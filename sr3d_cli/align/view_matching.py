@@ -172,9 +172,12 @@ class ViewMatcher:
         alpha, beta, gamma = self.weights
         return ViewScore(alpha * ssim + beta * edges + gamma * asp, ssim, edges, asp)
 
-    def render_and_score(self, vertices, faces, R, t, scale, K, window) -> tuple[ViewScore,
-                                                                                  np.ndarray]:
+    def render_and_score(self, vertices, faces, R, t, scale, K, window,
+                         twins=None) -> tuple[ViewScore, np.ndarray]:
+        """Score of the silhouette of ``vertices (V, 3)`` (object frame), ``faces (F, 3)``
+        placed by ``R, t, scale`` and drawn in ``window`` (origin, shape, zoom), and that
+        silhouette ``(h, w) bool``; ``twins``: :func:`face_twins` of ``faces``, if known."""
         uv, _ = project_mesh(vertices, R, t, scale, K)
         (x0, y0), shape, zoom = window
-        sil = fill_silhouette(uv, faces, shape, (x0, y0), zoom)
+        sil = fill_silhouette(uv, faces, shape, (x0, y0), zoom, twins)
         return self.score(sil), sil
