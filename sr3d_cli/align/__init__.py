@@ -12,11 +12,13 @@ single raw-depth pixels, no refinement.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import cv2
 import numpy as np
 import trimesh
 from scipy.optimize import minimize
+from scipy.spatial import ConvexHull, QhullError
 
 from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candidates_sphere,
                                           icosphere_directions, is_axisymmetric,
@@ -134,6 +136,16 @@ class _Subject:
         return cls(K, np.asarray(mesh.vertices, dtype=np.float64), faces, face_twins(faces),
                    np.column_stack([xs, ys]).astype(np.float64))
 
+    @cached_property
+    def hull_verts(self) -> np.ndarray:
+        """(H, 3) float64 the vertices on the convex hull of ``verts`` (all of them when qhull
+        cannot build one). A projection's extremes lie among them: x / z and y / z over a convex
+        polytope in front of the camera peak at its corners."""
+        try:
+            return self.verts[ConvexHull(self.verts).vertices]
+        except (QhullError, ValueError):
+            return self.verts
+
 
 @dataclass
 class _Placing:
@@ -209,11 +221,12 @@ class Aligner:
         return anchor - scale * self._footprint(sub, R, plane.normal)[0]
 
     def _size_guess(self, sub: _Subject, R, anchor, plane, extent_px: float) -> float:
-        """Scale making the projected mesh as large as the mask (larger bounding-box side)."""
+        """Scale making the projected mesh as large as the mask (larger bounding-box side; the
+        box is that of the hull vertices' projections, the same as all vertices')."""
         s = float(anchor[2] * extent_px / sub.K[0, 0])  # metres spanned by the mask there
         for _ in range(SIZE_GUESS_ROUNDS):
             t = self._rest_translation(sub, R, s, anchor, plane)
-            uv, _ = project_mesh(sub.verts, R, t, s, sub.K)
+            uv, _ = project_mesh(sub.hull_verts, R, t, s, sub.K)
             uv = uv[np.isfinite(uv).all(1)]
             if len(uv) == 0:
                 break
