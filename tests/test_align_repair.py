@@ -9,13 +9,13 @@ import pytest
 import trimesh
 from click.testing import CliRunner
 
-from sr3d_cli.align import AlignError, Aligner, _Subject
+from sr3d_cli.align import AlignError, Aligner, _Subject, _Window
 from sr3d_cli.cli import cli
 from sr3d_cli.config import AlignConfig
 from sr3d_cli.geometry.camera import Camera
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import revolve
-from sr3d_cli.geometry.transforms import make_T, rotation_about
+from sr3d_cli.geometry.transforms import make_T, rotation_about, unit
 from sr3d_cli.io.images import read_depth
 from sr3d_cli.render import RenderMesh, make_renderer
 from sr3d_cli.repair import compose_depth
@@ -247,3 +247,24 @@ def test_align_keeps_to_its_render_budget_and_never_ends_above_its_start_on_a_wr
     d = small(wrong, mask, K, plane, raw).diagnostics
     assert d["renders"] <= small.render_bound(wrong)
     assert d["refine_renders"] <= 10 and d["refine_error"] <= d["refine_error_start"]
+
+
+def test_refinement_run_in_steps_ends_where_one_whole_run_ends():
+    """A seed 6 mm off and 10% too small: refinement runs one Nelder-Mead run, is compared,
+    then goes on; it ends at the very pose and error of the same refinement run at once, and
+    below its start's error."""
+    plane, T, scale, mask, raw, _ = _scene(12)
+    aligner = Aligner(AlignConfig())
+    sub = _Subject.of(BOTTLE, mask, K)
+    window = _Window(mask, aligner.cfg.window)
+    t0 = T[:3, 3] + 0.006 * unit(np.cross(plane.normal, [1.0, 0, 0]))
+    whole = aligner._refine(sub, T[:3, :3], t0, 0.9 * scale, plane, window, yaw_free=False)
+    whole.run()
+    steps = aligner._refine(sub, T[:3, :3], t0, 0.9 * scale, plane, window, yaw_free=False)
+    steps.run(1)
+    assert not steps.done and steps.recent_gain >= 0
+    steps.run()
+    assert steps.done
+    (R1, t1, s1, _, i1), (R2, t2, s2, _, i2) = whole.result(), steps.result()
+    assert np.array_equal(t1, t2) and s1 == s2 and i1 == i2
+    assert i1["refine_error"] < 0.5 * i1["refine_error_start"]

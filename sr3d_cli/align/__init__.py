@@ -12,11 +12,13 @@ single raw-depth pixels, no refinement.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import cv2
 import numpy as np
 import trimesh
 from scipy.optimize import minimize
+from scipy.spatial import ConvexHull, QhullError
 
 from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candidates_sphere,
                                           icosphere_directions, is_axisymmetric,
@@ -49,6 +51,10 @@ REFINE_RESTARTS = 2  # Nelder-Mead runs: a restart with a fresh simplex escapes 
 REFINE_STEP_SHRINK = 3  # the restart's simplex is this many times smaller
 REFINE_XATOL = 1e-4  # Nelder-Mead stop: simplex size in the refined parameters
 REFINE_FATOL = 1e-5  # Nelder-Mead stop: spread of soft-IoU errors over the simplex
+REFINE_FIRST_RUNS = 1  # Nelder-Mead runs every seed gets before the seeds are compared
+REFINE_KEEP_MARGIN = 0.02  # score (IoU + prior) below the leader within which a seed's
+# refinement always goes on: a converged seed's restart gains ~0.01 IoU on extsim; a seed still
+# descending goes on when its last run's second-half gain would close the gap (0.09 seen)
 DEPTH_ROUNDS = 3  # inlier / median rounds of the depth-correction factor
 DEPTH_VOTE_STEP = 0.005  # spacing of the depth factors that vote (0.5%)
 UPRIGHT_COS = 0.999  # |cos| between the object's +z and the plane normal for "standing upright"
@@ -134,6 +140,16 @@ class _Subject:
         return cls(K, np.asarray(mesh.vertices, dtype=np.float64), faces, face_twins(faces),
                    np.column_stack([xs, ys]).astype(np.float64))
 
+    @cached_property
+    def hull_verts(self) -> np.ndarray:
+        """(H, 3) float64 the vertices on the convex hull of ``verts`` (all of them when qhull
+        cannot build one). A projection's extremes lie among them: x / z and y / z over a convex
+        polytope in front of the camera peak at its corners."""
+        try:
+            return self.verts[ConvexHull(self.verts).vertices]
+        except (QhullError, ValueError):
+            return self.verts
+
 
 @dataclass
 class _Placing:
@@ -187,6 +203,25 @@ class _Choice:
     diag: dict
 
 
+@dataclass
+class _Placed:
+    """A seed placed so far: its choice (score, pose), the seed, its keypoint diagnostics,
+    and its refinement when that can run on (None when it was not refined)."""
+    choice: _Choice
+    seed: _Seed
+    diag: dict
+    refinement: object
+
+
+def _best(placed: list[_Placed]) -> _Choice | None:
+    """The highest-scoring choice, the first among equals (None when there is none)."""
+    best = None
+    for one in placed:
+        if best is None or one.choice.score > best.score:
+            best = one.choice
+    return best
+
+
 class Aligner:
     """Places one mesh for one observed mask."""
 
@@ -209,11 +244,12 @@ class Aligner:
         return anchor - scale * self._footprint(sub, R, plane.normal)[0]
 
     def _size_guess(self, sub: _Subject, R, anchor, plane, extent_px: float) -> float:
-        """Scale making the projected mesh as large as the mask (larger bounding-box side)."""
+        """Scale making the projected mesh as large as the mask (larger bounding-box side; the
+        box is that of the hull vertices' projections, the same as all vertices')."""
         s = float(anchor[2] * extent_px / sub.K[0, 0])  # metres spanned by the mask there
         for _ in range(SIZE_GUESS_ROUNDS):
             t = self._rest_translation(sub, R, s, anchor, plane)
-            uv, _ = project_mesh(sub.verts, R, t, s, sub.K)
+            uv, _ = project_mesh(sub.hull_verts, R, t, s, sub.K)
             uv = uv[np.isfinite(uv).all(1)]
             if len(uv) == 0:
                 break
@@ -305,65 +341,9 @@ class Aligner:
         return scale, t, {"contact_points": [sub.mask_px[i].tolist() for i in reps]}
 
     # ---- refinement -----------------------------------------------------------------------------
-    def _refine(self, sub: _Subject, R, t, scale, plane, window, yaw_free):
-        """Silhouette refinement on the plane (Nelder-Mead over shift, log-scale and, with
-        ``yaw_free``, yaw). Bounded: at most ``refine_evals`` silhouette renders (a pose met
-        again is not redrawn). Monotone: the pose returned is the lowest-error one evaluated, the
-        start among them, so the error (1 - soft silhouette IoU) never ends above the start's.
-        Returns (R, t, scale, silhouette (h, w) bool in ``window`` of that pose, info: the
-        start's and the end's error and the renders drawn)."""
-        n = plane.normal
-        e1 = unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < AXIS_PICK_COS
-                  else np.cross(n, [0, 1.0, 0]))
-        e2 = np.cross(n, e1)
-        obs = _soft(window.obs)
-        shown = 1.0 if window.occluders is None else 1.0 - window.occluders
-        obs = obs * shown
-        pivot = t + scale * self._footprint(sub, R, n)[0]  # contact centre
-
-        def pose(x):
-            dx, dy, ls, yaw = x[0], x[1], x[2], x[3] if yaw_free else 0.0
-            Ry = rotation_about(n, yaw)
-            R1 = Ry @ R
-            s1 = scale * np.exp(ls)
-            p1 = pivot + dx * e1 + dy * e2
-            foot, low = self._footprint(sub, R1, n)
-            t1 = p1 - s1 * foot
-            t1 = t1 - (n @ t1 + s1 * low + plane.offset) * n  # rest on the plane
-            return R1, t1, s1
-
-        errors: dict[bytes, float] = {}  # by pose parameters: a vertex met again is not redrawn
-        best = {"error": np.inf}
-
-        def cost(x):
-            key = np.asarray(x, dtype=np.float64).tobytes()
-            if key not in errors:
-                R1, t1, s1 = pose(x)
-                sil = self._silhouette(sub, R1, t1, s1, window)
-                ren = _soft(sil) * shown
-                inter = np.minimum(obs, ren).sum()
-                errors[key] = 1.0 - inter / max(np.maximum(obs, ren).sum(), TINY)
-                if errors[key] < best["error"]:
-                    best.update(error=errors[key], x=np.array(x, dtype=np.float64), sil=sil)
-            return errors[key]
-
-        x = np.zeros(4 if yaw_free else 3)
-        start = cost(x)
-        step = np.array(REFINE_STEP)[:len(x)]
-        for _ in range(REFINE_RESTARTS):
-            simplex = np.vstack([x] + [x + np.eye(len(x))[i] * step[i] for i in range(len(x))])
-            # scipy stops a run at maxfev calls of cost, memoised ones included
-            minimize(cost, x, method="Nelder-Mead",
-                     options={"initial_simplex": simplex,
-                              "maxfev": self.cfg.refine_evals // REFINE_RESTARTS,
-                              "xatol": REFINE_XATOL, "fatol": REFINE_FATOL})
-            x = best["x"]
-            step = step / REFINE_STEP_SHRINK
-        R1, t1, s1 = pose(best["x"])
-        return R1, t1, s1, best["sil"], {
-            "refine_error_start": round(float(start), ERROR_DIGITS),
-            "refine_error": round(float(best["error"]), ERROR_DIGITS),
-            "refine_renders": len(errors)}
+    def _refine(self, sub: _Subject, R, t, scale, plane, window, yaw_free) -> "_Refinement":
+        """Silhouette refinement on the plane (:class:`_Refinement`), not yet run."""
+        return _Refinement(self, sub, R, t, scale, plane, window, yaw_free)
 
     def render_bound(self, mesh: trimesh.Trimesh | None = None) -> int:
         """The most silhouette renders one placement draws (its bounded cost): every candidate
@@ -452,22 +432,16 @@ class Aligner:
         cfg = self.cfg
         _check_inputs(mesh, mask, plane)
         p = self._start(mesh, mask, K, plane, depth_m, occluders)
-        best = None
+        placed: list[_Placed] = []
         for batch in (lambda: self._hint_seed(p, hint), lambda: self._candidates(p)):
+            best = _best(placed)
             if best is not None and best.iou >= cfg.hint_accept:
                 break  # the reconstruction's own pose explains the mask: no search needed
             for seed in batch():
-                placed = self._place_seed(p, seed)
-                if placed is None:
-                    continue
-                R, t, scale, sil, diag = placed
-                if sil is None:
-                    sil = self._silhouette(p.subject, R, t, scale, p.window)
-                    p.renders += 1
-                iou = mask_iou(sil, p.window.obs, p.window.occluders)
-                if best is None or iou + seed.prior > best.score:
-                    best = _Choice(iou + seed.prior, iou, seed.index, R, t, scale, seed.view,
-                                   diag)
+                one = self._place_seed(p, seed)
+                if one is not None:
+                    placed.append(one)
+        best = self._finish_refinements(p, placed)
         if best is None:
             raise AlignError("no candidate orientation could be matched to the contact edge")
         t, scale, diag = best.t, best.scale, best.diag
@@ -544,42 +518,69 @@ class Aligner:
         return [_Seed(view.total, self._upright_prior(T_h[:3, :3], p.plane), "hint", -1,
                       T_h[:3, :3], s_h, T_h[:3, 3], view)]
 
-    def _place_seed(self, p: _Placing, seed: _Seed):
-        """Keypoint solve and refinement of one seed: (R, t, scale, its silhouette in the window
-        or None, diagnostics), or None when its contact edge cannot be matched (sr3d mode)."""
+    def _place_seed(self, p: _Placing, seed: _Seed) -> "_Placed | None":
+        """Keypoint solve and the first ``REFINE_FIRST_RUNS`` refinement runs of one seed (all
+        of them for the reconstruction's pose), or None when its contact edge cannot be matched
+        (sr3d mode)."""
         cfg = self.cfg
         R = seed.R
-        sil = None
         if seed.group == "hint":
             diag = {"seed": "reconstruction pose"}
             if cfg.refine_hint:
-                R, t, scale, sil, info = self._refine_seed(p, R, seed.t0, seed.s0)
-                diag.update(info)
-            else:
-                t, scale = seed.t0, seed.s0
-        elif p.plain:
+                return self._refine_seed(p, seed, R, seed.t0, seed.s0, diag, REFINE_RESTARTS)
+            return self._chosen(p, seed, R, seed.t0, seed.s0, None, diag)
+        if p.plain:
             scale, t, diag = self._keypoints_paper(p.subject, R, seed.s0, seed.t0, p.down,
                                                    p.depth_m)
-        else:
-            try:
-                scale, t, diag = self._keypoints_sr3d(p.subject, R, seed.s0, seed.t0, p.plane,
-                                                      p.down)
-            except AlignError:
-                return None
-            R, t, scale, sil, info = self._refine_seed(p, R, t, scale)
-            diag = {**diag, **info}
-        return R, t, scale, sil, diag
+            return self._chosen(p, seed, R, t, scale, None, diag)
+        try:
+            scale, t, diag = self._keypoints_sr3d(p.subject, R, seed.s0, seed.t0, p.plane,
+                                                  p.down)
+        except AlignError:
+            return None
+        return self._refine_seed(p, seed, R, t, scale, diag, REFINE_FIRST_RUNS)
 
-    def _refine_seed(self, p: _Placing, R, t, scale):
-        """(R, t, scale, its silhouette in the window or None, refinement info); yaw stays fixed
+    def _refine_seed(self, p: _Placing, seed: _Seed, R, t, scale, diag: dict,
+                     runs: int) -> "_Placed":
+        """The seed refined by ``runs`` Nelder-Mead runs (:class:`_Refinement`); yaw stays fixed
         for an axisymmetric mesh standing upright (turning it changes nothing)."""
         if not self.cfg.refine:
-            return R, t, scale, None, {}
-        R, t, scale, sil, info = self._refine(
-            p.subject, R, t, scale, p.plane, p.window,
-            yaw_free=not (p.symmetric and self._upright(R, p.plane)))
-        p.renders += info["refine_renders"]
-        return R, t, scale, sil, info
+            return self._chosen(p, seed, R, t, scale, None, diag)
+        refinement = self._refine(p.subject, R, t, scale, p.plane, p.window,
+                                  yaw_free=not (p.symmetric and self._upright(R, p.plane)))
+        return self._go_on(p, _Placed(None, seed, diag, refinement), runs)
+
+    def _go_on(self, p: _Placing, placed: "_Placed", runs: int) -> "_Placed":
+        """``placed`` after ``runs`` more runs of its refinement, scored again."""
+        refinement = placed.refinement
+        refinement.run(runs)
+        p.renders += refinement.new_renders()
+        R, t, scale, sil, info = refinement.result()
+        return _Placed(self._chosen(p, placed.seed, R, t, scale, sil,
+                                    {**placed.diag, **info}).choice,
+                       placed.seed, placed.diag, refinement)
+
+    def _chosen(self, p: _Placing, seed: _Seed, R, t, scale, sil, diag: dict) -> "_Placed":
+        """A placed seed scored by its silhouette IoU (``sil`` drawn when None) plus prior."""
+        if sil is None:
+            sil = self._silhouette(p.subject, R, t, scale, p.window)
+            p.renders += 1
+        iou = mask_iou(sil, p.window.obs, p.window.occluders)
+        return _Placed(_Choice(iou + seed.prior, iou, seed.index, R, t, scale, seed.view, diag),
+                       seed, diag, None)
+
+    def _finish_refinements(self, p: _Placing, placed: list["_Placed"]) -> _Choice | None:
+        """The best placed seed once the refinement of every seed that may still catch up
+        with the leader has run to its end: those within ``REFINE_KEEP_MARGIN`` of the
+        leader's score, or within what their last run gained over its second half (still
+        descending). The others lose to the leader by more than their remaining runs gain."""
+        leader = _best(placed)
+        for k, one in enumerate(placed):
+            if one.refinement is not None and not one.refinement.done and \
+                    one.choice.score + max(REFINE_KEEP_MARGIN, one.refinement.recent_gain) \
+                    >= leader.score:
+                placed[k] = self._go_on(p, one, REFINE_RESTARTS)
+        return _best(placed)
 
     def _placement(self, p: _Placing, best: _Choice, t, scale, diag) -> Placement:
         """The chosen pose with its scores and diagnostics."""
@@ -597,6 +598,104 @@ class Aligner:
     @staticmethod
     def _upright(R, plane) -> bool:
         return abs((R @ np.array([0, 0, 1.0])) @ plane.normal) > UPRIGHT_COS
+
+
+class _Refinement:
+    """Silhouette refinement on the plane (Nelder-Mead over shift, log-scale and, with
+    ``yaw_free``, yaw), run in steps so that seeds can be compared between its runs: each
+    :meth:`run` is one more Nelder-Mead run (``REFINE_RESTARTS`` in all, each restart with a
+    fresh, ``REFINE_STEP_SHRINK`` times smaller simplex around the best pose so far). Bounded:
+    at most ``refine_evals`` silhouette renders over all runs (a pose met again is not
+    redrawn). Monotone: the pose kept is the lowest-error one evaluated, the start among them,
+    so the error (1 - soft silhouette IoU) never ends above the start's."""
+
+    def __init__(self, aligner: "Aligner", sub: _Subject, R, t, scale, plane, window: _Window,
+                 yaw_free: bool):
+        n = plane.normal
+        self.aligner, self.sub, self.R, self.scale, self.plane = aligner, sub, R, scale, plane
+        self.window, self.yaw_free = window, yaw_free
+        self.e1 = unit(np.cross(n, [1.0, 0, 0]) if abs(n[0]) < AXIS_PICK_COS
+                       else np.cross(n, [0, 1.0, 0]))
+        self.e2 = np.cross(n, self.e1)
+        self.shown = 1.0 if window.occluders is None else 1.0 - window.occluders
+        self.obs = _soft(window.obs) * self.shown
+        self.pivot = t + scale * aligner._footprint(sub, R, n)[0]  # contact centre
+        self.errors: dict[bytes, float] = {}  # by pose parameters: not redrawn when met again
+        self.history: list[float] = []  # best error after each render
+        self.run_start = 0  # renders drawn before the last run
+        self.best = {"error": np.inf}
+        self.x = np.zeros(4 if yaw_free else 3)
+        self.start = self.cost(self.x)
+        self.step = np.array(REFINE_STEP)[:len(self.x)]
+        self.runs = 0
+        self.counted = 0  # renders already reported by new_renders
+
+    def new_renders(self) -> int:
+        """Silhouettes drawn since the last call (all of them at the first)."""
+        new, self.counted = len(self.errors) - self.counted, len(self.errors)
+        return new
+
+    def pose(self, x):
+        """(R (3, 3), t (3,) metres, scale) of parameters ``x``: shift (metres) along e1, e2,
+        log-scale and yaw, resting on the plane."""
+        n = self.plane.normal
+        dx, dy, ls, yaw = x[0], x[1], x[2], x[3] if self.yaw_free else 0.0
+        R1 = rotation_about(n, yaw) @ self.R
+        s1 = self.scale * np.exp(ls)
+        p1 = self.pivot + dx * self.e1 + dy * self.e2
+        foot, low = self.aligner._footprint(self.sub, R1, n)
+        t1 = p1 - s1 * foot
+        t1 = t1 - (n @ t1 + s1 * low + self.plane.offset) * n  # rest on the plane
+        return R1, t1, s1
+
+    def cost(self, x) -> float:
+        """1 - soft silhouette IoU of the pose ``x`` (memoised)."""
+        key = np.asarray(x, dtype=np.float64).tobytes()
+        if key not in self.errors:
+            R1, t1, s1 = self.pose(x)
+            sil = self.aligner._silhouette(self.sub, R1, t1, s1, self.window)
+            ren = _soft(sil) * self.shown
+            inter = np.minimum(self.obs, ren).sum()
+            self.errors[key] = 1.0 - inter / max(np.maximum(self.obs, ren).sum(), TINY)
+            if self.errors[key] < self.best["error"]:
+                self.best.update(error=self.errors[key], x=np.array(x, dtype=np.float64),
+                                 sil=sil)
+            self.history.append(self.best["error"])
+        return self.errors[key]
+
+    @property
+    def recent_gain(self) -> float:
+        """How much the best error fell over the second half of the last run's renders."""
+        drawn = self.history[self.run_start:]
+        return float(drawn[len(drawn) // 2] - drawn[-1]) if drawn else 0.0
+
+    @property
+    def done(self) -> bool:
+        return self.runs >= REFINE_RESTARTS
+
+    def run(self, runs: int = REFINE_RESTARTS) -> None:
+        """Up to ``runs`` more Nelder-Mead runs (none past ``REFINE_RESTARTS``)."""
+        for _ in range(min(runs, REFINE_RESTARTS - self.runs)):
+            x, step = self.x, self.step
+            self.run_start = len(self.history)
+            simplex = np.vstack([x] + [x + np.eye(len(x))[i] * step[i] for i in range(len(x))])
+            # scipy stops a run at maxfev calls of cost, memoised ones included
+            minimize(self.cost, x, method="Nelder-Mead",
+                     options={"initial_simplex": simplex,
+                              "maxfev": self.aligner.cfg.refine_evals // REFINE_RESTARTS,
+                              "xatol": REFINE_XATOL, "fatol": REFINE_FATOL})
+            self.x = self.best["x"]
+            self.step = step / REFINE_STEP_SHRINK
+            self.runs += 1
+
+    def result(self):
+        """(R, t, scale, silhouette (h, w) bool in the window of the best pose so far, info:
+        the start's and the best error and the renders drawn)."""
+        R1, t1, s1 = self.pose(self.best["x"])
+        return R1, t1, s1, self.best["sil"], {
+            "refine_error_start": round(float(self.start), ERROR_DIGITS),
+            "refine_error": round(float(self.best["error"]), ERROR_DIGITS),
+            "refine_renders": len(self.errors)}
 
 
 def _check_inputs(mesh: trimesh.Trimesh, mask: np.ndarray, plane: Plane | None) -> None:

@@ -128,20 +128,21 @@ def candidates_sphere(view_count: int, roll_steps: int, towards_camera: np.ndarr
 
 
 def _ssim_patches(a: np.ndarray, b: np.ndarray, grid: int) -> float:
-    """Mean SSIM over a ``grid`` x ``grid`` tiling of two images in [0, 1]."""
+    """Mean SSIM over a ``grid`` x ``grid`` tiling of two images ``(n, n)`` in [0, 1] (square
+    patches of side ``n // grid``; rows and columns past ``grid`` patches are left out)."""
     c1, c2 = 0.01 ** 2, 0.03 ** 2
     h = a.shape[0] // grid
-    vals = []
-    for i in range(grid):
-        for j in range(grid):
-            pa = a[i * h:(i + 1) * h, j * h:(j + 1) * h]
-            pb = b[i * h:(i + 1) * h, j * h:(j + 1) * h]
-            ma, mb = pa.mean(), pb.mean()
-            va, vb = pa.var(), pb.var()
-            cov = ((pa - ma) * (pb - mb)).mean()
-            vals.append(((2 * ma * mb + c1) * (2 * cov + c2)) /
-                        ((ma * ma + mb * mb + c1) * (va + vb + c2)))
-    return float(np.mean(vals))
+
+    def tiles(img):  # (grid, grid, h * h): one row of pixels per patch
+        img = np.asarray(img)[:grid * h, :grid * h]
+        return img.reshape(grid, h, grid, h).transpose(0, 2, 1, 3).reshape(grid, grid, h * h)
+
+    pa, pb = tiles(a), tiles(b)
+    ma, mb = pa.mean(-1), pb.mean(-1)
+    va, vb = pa.var(-1), pb.var(-1)
+    cov = ((pa - ma[..., None]) * (pb - mb[..., None])).mean(-1)
+    vals = ((2 * ma * mb + c1) * (2 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2))
+    return float(vals.mean())
 
 
 def _edge_correlation(a: np.ndarray, b: np.ndarray) -> float:
