@@ -179,7 +179,8 @@ def _metres(gap_px: float, moved_px: float, eps: float) -> float:
 
 
 def _orientation(mask: np.ndarray) -> float:
-    """Angle (radians, from the window's vertical, clockwise positive) of a mask's major axis."""
+    """Angle (radians, from the window's vertical, clockwise positive) of the major axis of a
+    mask (h, w) bool."""
     m = cv2.moments(mask.view(np.uint8), binaryImage=True)  # central moments: sums over pixels
     if m["m00"] < 3:
         return 0.0
