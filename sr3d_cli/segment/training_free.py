@@ -975,7 +975,7 @@ def _fit_parts(reg: _Region, whole: _Whole, outline_may_hold: bool, a: np.ndarra
             f_front = reg.fits(front)
             if not _part_may_hold(f_front, whole, outline_may_hold):
                 return None
-            f_back = reg.fits(back)
+            f_back = None  # the part behind fitted alone only where its hidden fit is not kept
             if _could_hold(reg, whole, outline_may_hold, front, f_front, back):
                 hidden = reg.fits(back, front)
                 if hidden is not None and (f_front is None or stands_behind(
@@ -983,6 +983,8 @@ def _fit_parts(reg: _Region, whole: _Whole, outline_may_hold: bool, a: np.ndarra
                         reg.K, reg.plane)) and (r is None or r.on_surface(hidden, back) >=
                                                 HIDDEN_READINGS * r.count_in(back)):
                     f_back = hidden
+            if f_back is None:
+                f_back = reg.fits(back)
             return (f_front, f_back) if front is a else (f_back, f_front)
     fa = reg.fits(a)
     return (fa, reg.fits(b)) if _part_may_hold(fa, whole, outline_may_hold) else None

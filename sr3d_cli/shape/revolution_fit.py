@@ -179,12 +179,12 @@ def _metres(gap_px: float, moved_px: float, eps: float) -> float:
 
 
 def _orientation(mask: np.ndarray) -> float:
-    """Angle (radians, from the window's vertical, clockwise positive) of a mask's major axis."""
-    ys, xs = _pixels(mask)
-    if len(xs) < 3:
+    """Angle (radians, from the window's vertical, clockwise positive) of the major axis of a
+    mask (h, w) bool."""
+    m = cv2.moments(mask.view(np.uint8), binaryImage=True)  # central moments: sums over pixels
+    if m["m00"] < 3:
         return 0.0
-    x, y = xs - xs.mean(), ys - ys.mean()
-    angle = 0.5 * np.arctan2(2 * (x * y).mean(), (x * x).mean() - (y * y).mean())  # from +x
+    angle = 0.5 * np.arctan2(2 * m["mu11"], m["mu20"] - m["mu02"])  # from +x
     return float(angle + np.pi / 2 if angle < 0 else angle - np.pi / 2)
 
 
