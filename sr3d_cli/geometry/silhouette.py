@@ -4,10 +4,10 @@ Projected triangles are filled as OpenCV fills them at a quarter-pixel, in a win
 when asked: only the outline matters while a shape or a pose is searched, so no depth test is
 needed (every far-side triangle is filled), and hundreds of candidates are drawn per object;
 the inside of the outline is filled by one scanline pass, cv2 only draws the triangles along
-it (:func:`fill_silhouette`). Full renders (depth, ids and normals for the repaired depth) use :mod:`sr3d_cli.render`,
-whose z-buffer takes a pixel when a triangle covers its centre, as OpenGL does; this fill also
-takes a pixel its outline touches, and the fits' constants are tuned to that (see
-:func:`sr3d_cli.geometry.revolution.silhouette`), so the two stay apart.
+it (:func:`fill_silhouette`). Full renders (depth, ids and normals for the repaired depth) use
+:mod:`sr3d_cli.render`, whose z-buffer takes a pixel when a triangle covers its centre, as
+OpenGL does; this fill also takes a pixel its outline touches, and the fits' constants are tuned
+to that (see :func:`sr3d_cli.geometry.revolution.silhouette`), so the two stay apart.
 """
 
 from __future__ import annotations
