@@ -32,11 +32,15 @@ def test_outer_profile_of_an_open_vessel_is_its_outer_wall_closed_at_the_rim():
     assert len(profile) == len(OUTER) + 2  # and where the inner base meets the wall's height
 
 
-def test_no_profile_where_it_meets_the_axis_between_its_ends_or_has_too_many_points():
+def test_no_profile_for_a_handle_a_gap_on_the_axis_or_too_many_points():
     stacked = trimesh.util.concatenate([  # two bodies on the axis, a gap between them
         revolve(np.array([[0, 0], [0.3, 0.1], [0.3, 0.4], [0, 0.45]])),
         revolve(np.array([[0, 0.55], [0.3, 0.6], [0.3, 0.9], [0, 1.0]]))])
     assert outer_profile(stacked.vertices, stacked.faces, max_points=600) is None
+    handle = trimesh.creation.box(extents=(0.05, 0.1, 0.5))  # a slab beside the wall
+    handle.apply_translation([0.0, 0.4, 0.5])
+    with_handle = trimesh.util.concatenate([CUP, handle])
+    assert outer_profile(with_handle.vertices, with_handle.faces, max_points=600) is None
     assert outer_profile(CUP.vertices, CUP.faces, max_points=5) is None
     assert revolution_stand_in(CUP, 0.002, 24, max_points=5) is None
 

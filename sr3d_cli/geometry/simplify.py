@@ -4,7 +4,8 @@ A silhouette's cost grows with the triangles along its outline (each is filled o
 :func:`sr3d_cli.geometry.silhouette.fill_silhouette`); a pose search draws hundreds of them. A
 body of revolution casts the silhouette of the solid its outer profile bounds (a ray into a
 vessel's opening meets its inner wall or base), so the stand-in is that outer profile, simplified,
-revolved with fewer sections: no inner wall, fewer triangles along the outline.
+revolved with fewer sections: no inner wall, fewer triangles along the outline. A mesh with
+vertices off its rings (a handle) has no stand-in: turned about the axis, they would be a disc.
 """
 
 from __future__ import annotations
@@ -12,30 +13,44 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from sr3d_cli.geometry.revolution import revolve
 
 
 RZ_QUANTUM = 1e-5  # (r, z) rounding (object units) that merges a ring's vertices, whose radii
 # differ by float32 rounding of the mesh file
+MIN_RING = 8  # vertices at one (r, z) off the axis of a mesh of revolution: a ring (revolve
+# draws 48, the synthetic shapes 64); a handle, or any mesh not revolved, has fewer
 
 
 def outer_profile(vertices: np.ndarray, faces: np.ndarray, max_points: int) -> np.ndarray | None:
     """The outer profile ``(n, 2)`` (r, z) of a mesh of revolution about its z axis, from the
     base (r = 0) to the top (r = 0): at every height of a vertex, the largest radius of the
     mesh's edges there (each edge taken as the segment between its ends' (r, z), radii and
-    heights rounded to ``RZ_QUANTUM``). None when the mesh has more than ``max_points``
-    distinct (r, z), or the profile meets the axis between its ends, or a height between them
-    has no edge (it cannot be revolved).
+    heights rounded to ``RZ_QUANTUM``). None when a vertex off the axis is not on a ring (fewer
+    than ``MIN_RING`` vertices within ``RZ_QUANTUM`` of its (r, z): a handle's, or a mesh not
+    revolved), the mesh has more than ``max_points`` distinct (r, z), or the profile meets
+    the axis between its ends, or a height between them has no edge (it cannot be revolved).
 
     vertices : (V, 3) float, faces : (F, 3) int, object frame."""
     rz = np.column_stack([np.hypot(vertices[:, 0], vertices[:, 1]), vertices[:, 2]])
-    rz = np.round(rz / RZ_QUANTUM) * RZ_QUANTUM
-    points, index = np.unique(rz, axis=0, return_inverse=True)
-    if len(points) > max_points:
+    off_axis = rz[rz[:, 0] > RZ_QUANTUM]
+    if len(off_axis) and cKDTree(off_axis).query_ball_point(
+            off_axis, RZ_QUANTUM, p=np.inf, return_length=True).min() < MIN_RING:
         return None
-    pairs = index.ravel()[np.asarray(faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)]
-    edges = np.unique(np.sort(pairs, axis=1), axis=0)
+    cells = np.round(rz / RZ_QUANTUM).astype(np.int64)  # (V, 2) (r, z) in quanta
+    low = cells[:, 1].min()
+    rows = cells[:, 1].max() - low + 1
+    keys, index = np.unique(cells[:, 0] * rows + cells[:, 1] - low, return_inverse=True)
+    if len(keys) > max_points:
+        return None
+    r_cell, z_cell = np.divmod(keys, rows)
+    points = np.column_stack([r_cell, z_cell + low]) * RZ_QUANTUM  # (P, 2) distinct (r, z)
+    pairs = np.sort(index.ravel()[np.asarray(faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)],
+                    axis=1)
+    edge_keys = np.unique(pairs[:, 0] * len(keys) + pairs[:, 1])
+    edges = np.column_stack(np.divmod(edge_keys, len(keys)))
     a, b = points[edges[:, 0]], points[edges[:, 1]]  # (E, 2) (r, z) ends
     z = np.unique(points[:, 1])  # (Z,) heights of the vertices
     dz = b[:, 1] - a[:, 1]
