@@ -230,7 +230,7 @@ class _Placed:
     choice: _Choice
     seed: _Seed
     diag: dict
-    refinement: object
+    refinement: "_Refinement | None"
 
 
 def _best(placed: list[_Placed]) -> _Choice | None:
