@@ -104,7 +104,7 @@ def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
                 judged.append(stages.evaluate_grasp_frame(scene, fid, cfg))
             frames.append(scene.frame_key(fid))
             print(scene.frame_key(fid), "IoU", [round(v, 2) for v in seg["best_iou"].values()],
-                  "false", seg["false"], f"sr3d {rows['sr3d'][-1]['mae'] * 1000:.1f} mm",
+                  "false", seg["false"], f"inv {invented[-1]*100:.2f}%", f"sr3d {rows['sr3d'][-1]['mae'] * 1000:.1f} mm",
                   f"raw {rows['raw'][-1]['mae'] * 1000:.1f} mm", f"{t['total']:.1f} s",
                   file=sys.stderr)
     out = {"frames": len(frames), "objects": len(ious),

@@ -135,6 +135,7 @@ class AlignConfig:
 @dataclass
 class RepairConfig:
     outside_render: str = "nearest"
+    beyond_mask: bool = True
 
 
 @dataclass

@@ -133,9 +133,11 @@ class Pipeline:
             k = int(obj["id"])
             placed.append((k, state.mesh(k), np.asarray(obj["T_cam_obj"], dtype=np.float64),
                            float(obj["scale"])))
-        plane = state.plane()[0] if self.cfg.repair.outside_render == "plane" else None
+        rcfg = self.cfg.repair
+        plane = state.plane()[0] if rcfg.outside_render == "plane" or rcfg.beyond_mask else None
         from sr3d_cli.repair import repair_frame
 
         depth = repair_frame(frame.depth_m, ids, frame.camera, self.renderer, placed,
-                             plane=plane, outside_render=self.cfg.repair.outside_render)
+                             plane=plane, outside_render=rcfg.outside_render,
+                             beyond_mask=rcfg.beyond_mask)
         return depth, ids

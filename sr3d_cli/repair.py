@@ -5,6 +5,12 @@ the nearest surface where objects overlap); elsewhere the sensor's depth is kept
 placed mesh does not cover take the nearest rendered depth within a few pixels
 (``outside_render: nearest``, the default), keep the sensor's reading (``keep``) or take the
 table's depth (``plane``). Objects that could not be placed are left untouched.
+
+Just outside the masks (``beyond_mask``, the default), the placed mesh also replaces the readings
+it hides: the sensor's holes within :data:`HOLE_REACH` px of a mask and readings of the table (or
+beyond it) seen through the object, farther than the mesh's surface. A mask that misses part of
+its object then still gets that part's depth; readings in front of the mesh (an occluder) and
+readings of the room above the table's plane (a wall behind a misplaced mesh) stay the sensor's.
 """
 
 from __future__ import annotations
@@ -17,6 +23,10 @@ from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points
 from sr3d_cli.render import RenderMesh, Renderer
 
+HOLE_REACH = 15  # px from a mask within which the placed mesh fills the sensor's holes
+BEHIND = 0.01  # m: a reading this much farther than the mesh's surface is seen through it
+ON_TABLE = 0.01  # m: a reading no nearer than the table's plane by this reads the table or beyond
+
 
 def placed_render_meshes(placed: list[tuple[int, object, np.ndarray, float]]) -> list[RenderMesh]:
     """(id, trimesh, T_cam_obj, scale) -> camera-frame meshes for the renderer."""
@@ -24,18 +34,36 @@ def placed_render_meshes(placed: list[tuple[int, object, np.ndarray, float]]) ->
             for k, mesh, T, scale in placed]
 
 
+def hidden_beyond(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
+                  placed_ids: list[int], plane: Plane, K: np.ndarray) -> np.ndarray:
+    """(H, W) bool: pixels outside every mask where the placed meshes hide the sensor's reading
+    (see the module docstring). raw_m, render_depth : (H, W) metres (0 = none); ids : (H, W)."""
+    drawn = (render_depth > 0) & (ids == 0)
+    if not drawn.any():
+        return drawn
+    near_mask = ndimage.distance_transform_edt(~np.isin(ids, placed_ids)) <= HOLE_REACH
+    table = plane.depth_image(raw_m.shape, K)
+    through = (raw_m > render_depth + BEHIND) & (table > 0) & (raw_m >= table - ON_TABLE)
+    return drawn & (((raw_m <= 0) & near_mask) | through)
+
+
 def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
                   placed_ids: list[int], *, plane: Plane | None = None, K: np.ndarray | None = None,
-                  outside_render: str = "nearest", max_gap: int = 6) -> np.ndarray:
+                  outside_render: str = "nearest", max_gap: int = 6,
+                  beyond_mask: bool = False) -> np.ndarray:
     """Repaired depth ``(H, W) float32`` metres.
 
     raw_m : sensor depth; ids : instance ids (H, W); render_depth : depth of the placed meshes
-    (0 = empty); placed_ids : the objects that were placed.
+    (0 = empty); placed_ids : the objects that were placed; beyond_mask : also replace the
+    readings the meshes hide just outside the masks (needs ``plane`` and ``K``).
     """
     out = raw_m.astype(np.float32).copy()
     inside = np.isin(ids, placed_ids)
     hit = inside & (render_depth > 0)
     out[hit] = render_depth[hit]
+    if beyond_mask and plane is not None and K is not None:
+        hidden = hidden_beyond(raw_m, ids, render_depth, placed_ids, plane, K)
+        out[hidden] = render_depth[hidden]
     miss = inside & ~hit
     if not miss.any() or not hit.any():
         return out
@@ -51,13 +79,13 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
 
 
 def repair_frame(raw_m: np.ndarray, ids: np.ndarray, camera: Camera, renderer: Renderer,
-                 placed: list, *, plane: Plane | None = None, outside_render: str = "nearest"
-                 ) -> np.ndarray:
+                 placed: list, *, plane: Plane | None = None, outside_render: str = "nearest",
+                 beyond_mask: bool = False) -> np.ndarray:
     if not placed:
         return raw_m.astype(np.float32).copy()
     render = renderer.render(placed_render_meshes(placed), camera)
     return compose_depth(raw_m, ids, render.depth, [p[0] for p in placed], plane=plane,
-                         K=camera.K, outside_render=outside_render)
+                         K=camera.K, outside_render=outside_render, beyond_mask=beyond_mask)
 
 
 def plane_fill(raw_m: np.ndarray, mask: np.ndarray, plane: Plane, K: np.ndarray) -> np.ndarray:

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from scipy import ndimage
 import trimesh
 from click.testing import CliRunner
 
@@ -272,3 +273,33 @@ def test_refinement_run_in_steps_ends_where_one_whole_run_ends():
     (R1, t1, s1, _, i1), (R2, t2, s2, _, i2) = whole.result(), steps.result()
     assert np.array_equal(t1, t2) and s1 == s2 and i1 == i2
     assert i1["refine_error"] < 0.5 * i1["refine_error_start"]
+
+
+def test_repair_beyond_the_mask_fills_what_the_mesh_hides_and_keeps_what_is_in_front():
+    plane, T, scale, mask, raw, gt = _scene(12)
+    table = _table_mesh(plane)
+    behind = make_renderer("numpy").render([table], CAMERA).depth
+    raw = np.where(mask, behind, raw)  # the glass shows the table through it
+    ys, xs = np.nonzero(mask)
+    top = ys.min() + (ys.max() - ys.min()) // 3
+    part = mask & (np.arange(mask.shape[0])[:, None] < top)  # the mask misses the top third
+    raw[part & (xs.min() + xs.max() < 2 * np.arange(mask.shape[1]))[None, :]] = 0  # holes
+    occluder = part & (np.arange(mask.shape[1]) < xs.min() + 6)[None, :]
+    raw[occluder] = gt[occluder] - 0.05  # something in front of the glass
+    render = make_renderer("numpy").render(
+        [RenderMesh(BOTTLE.vertices @ (scale * T[:3, :3]).T + T[:3, 3],
+                    np.asarray(BOTTLE.faces), 1)], CAMERA)
+    ids = (mask & ~part).astype(int)
+    kept = compose_depth(raw, ids, render.depth, [1], plane=plane, K=K)
+    filled = compose_depth(raw, ids, render.depth, [1], plane=plane, K=K, beyond_mask=True)
+    through = part & ~occluder & (raw > 0)
+    holes = part & (raw <= 0)
+    assert through.sum() > 300 and holes.sum() > 150
+    assert np.abs(kept - gt)[through].mean() > 0.02  # the table read through the glass
+    assert np.abs(filled - gt)[through].max() < 1e-6
+    reach = ndimage.distance_transform_edt(ids == 0)
+    assert np.abs(filled - gt)[holes & (reach <= 15)].max() < 1e-6
+    assert (holes & (reach > 15)).sum() > 50
+    assert np.all(filled[holes & (reach > 15)] == 0)  # far from every mask a hole stays one
+    assert np.array_equal(filled[occluder], raw[occluder])
+    assert np.array_equal(filled[~mask], raw[~mask])  # off the object: the sensor's depth
