@@ -15,6 +15,7 @@ readings of the room above the table's plane (a wall behind a misplaced mesh) st
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from scipy import ndimage
 
@@ -41,7 +42,8 @@ def hidden_beyond(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
     drawn = (render_depth > 0) & (ids == 0)
     if not drawn.any():
         return drawn
-    near_mask = ndimage.distance_transform_edt(~np.isin(ids, placed_ids)) <= HOLE_REACH
+    off = (~np.isin(ids, placed_ids)).astype(np.uint8)
+    near_mask = cv2.distanceTransform(off, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= HOLE_REACH
     table = plane.depth_image(raw_m.shape, K)
     through = (raw_m > render_depth + BEHIND) & (table > 0) & (raw_m >= table - ON_TABLE)
     return drawn & (((raw_m <= 0) & near_mask) | through)

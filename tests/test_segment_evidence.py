@@ -269,14 +269,15 @@ def test_instances_preview_labels_each_instance_with_its_score():
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.47, 8 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
+    per true object mean 0.485, 8 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
     < 0.2 with every object) 0.64 per frame; without the standing bodies (BODY_SEES_TABLE
-    out of reach) 0.23, none and 0.91."""
+    out of reach) 0.23, none and 0.91. The 8 views of the capped container: mean IoU 0.619,
+    0.589 without its lid's readings joined (``with_parts_on_axis``)."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
     segmenter = Segmenter(SegmentConfig(), PlaneConfig())
-    best, false, frames = [], 0, 0
+    best, false, frames, container = [], 0, 0, []
     for source in discover_scenes(realdata.parent, IOConfig(), None):
         for fid in source.frame_ids():
             frame = source.load_frame(fid)
@@ -284,12 +285,15 @@ def test_measured_on_the_shared_real_frames(realdata):
             inst = segmenter(fid, frame.rgb, frame.depth_m, frame.camera.K)
             ious = instance_ious(inst.ids, truth)
             best += list(ious.values())
+            if "tracebot" in source.name:
+                container += list(ious.values())
             false += sum(1 for k, iou in instance_ious(truth, inst.ids).items()
                          if iou < 0.2 and (inst.ids == k).sum() >= 300)
             frames += 1
     assert frames == 11 and len(best) == 16
     assert false / frames <= 0.8
-    assert np.mean(best) >= 0.44 and sum(v >= 0.5 for v in best) >= 7
+    assert np.mean(best) >= 0.46 and sum(v >= 0.5 for v in best) >= 7
+    assert len(container) == 8 and np.mean(container) >= 0.6
 
 
 def test_fill_holes_in_the_box_fills_what_scipy_fills():

@@ -27,7 +27,9 @@ The steps:
    whose colour replaces the table's (an opaque object: glass shows the table through itself,
    :func:`table_colour_departure`) and those with no outline in colour at all (a sensor's
    dropout on a plain surface, :func:`shows_outline`); each kept instance grown to its colour
-   outline (:func:`grow_to_outline`), as a real glass's depth evidence covers only part of it.
+   outline (:func:`grow_to_outline`), as a real glass's depth evidence covers only part of it;
+8. a standing instance joined to the readings inside its fitted solid's volume above it (an
+   opaque cap or lid reads well and gives no glass evidence: :func:`with_parts_on_axis`).
 """
 
 from __future__ import annotations
@@ -90,6 +92,9 @@ SEE_THROUGH_WINDOW = 91  # pixels: the table's colour around a body is taken bey
 TABLE_LIKE = 1.5  # colour departure under which a pixel shows the table's colour
 BEYOND_MARGIN = 3  # pixels: an object's part beyond the table's far edge stays within this of
 # the columns its part over the table spans (within_table_columns)
+ON_AXIS_MARGIN = 0.005  # metres beyond a standing glass's fitted radius within which readings
+# above the table belong to it (a cap or lid is no wider than its body; reading noise)
+ON_AXIS_REACH = 0.4  # metres along a standing glass's axis searched for its opaque parts
 
 
 @dataclass
@@ -555,8 +560,51 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
                                   close_radius=close_radius, min_area=min_area)) == 1
 
     joined = with_bodies(out, bodies, glass | ev.above, one_object)
-    return _without_overlaps([Candidate(within_table_columns(c.mask, footprint), c.score)
-                              for c in joined])
+    masks = [within_table_columns(c.mask, footprint) for c in joined]
+    return _without_overlaps([Candidate(with_parts_on_axis(m, K, plane, depth_m), c.score)
+                              for m, c in zip(masks, joined)])
+
+
+def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: np.ndarray
+                       ) -> np.ndarray:
+    """A standing glass's instance ``(H, W) bool`` with its opaque parts: the raw readings
+    ``depth_m (H, W)`` metres above the table (over ``BODY_SEED_HEIGHT``) that lie within the
+    radius of the instance's fitted solid of revolution (plus :data:`ON_AXIS_MARGIN`) around
+    its axis, up to :data:`ON_AXIS_REACH` along it, joined to the instance in the image.
+
+    A cap, lid or label reads well, so it gives no glass evidence and the instance stops below
+    it (the real container's lid: a model 0.075-0.08 m tall for a 0.12 m container). Nothing
+    else can hold readings inside the glass's own volume; an object beside or behind it lies
+    farther from its axis. Lying or unfitted instances are returned unchanged."""
+    try:
+        fit = fit_revolution(mask, K, plane, depth=depth_m, options=FitOptions(square_starts=False))
+    except ValueError:
+        return mask
+    if fit.resting != "standing":
+        return mask
+    radius = float(fit.profile[:, 0].max()) * fit.height + ON_AXIS_MARGIN
+    ys, xs = np.nonzero(mask)
+    tall = int(ys.max() - ys.min() + 1)  # the window: the instance's box, as far again above
+    y0, y1 = max(int(ys.min()) - tall, 0), int(ys.max()) + 1
+    x0, x1 = max(int(xs.min()) - tall // 2, 0), min(int(xs.max()) + tall // 2 + 1, mask.shape[1])
+    shifted = K.copy()
+    shifted[0, 2] -= x0
+    shifted[1, 2] -= y0
+    depth = depth_m[y0:y1, x0:x1]
+    points = depth_to_points(depth, shifted)
+    offset = points - fit.base
+    along = offset @ fit.axis
+    across = np.linalg.norm(offset - along[..., None] * fit.axis, axis=-1)
+    on_axis = (depth > 0) & (plane.height(points) > BODY_SEED_HEIGHT) & (across <= radius) & \
+        (along <= ON_AXIS_REACH)
+    own = mask[y0:y1, x0:x1]
+    both = cv2.morphologyEx((on_axis | own).astype(np.uint8), cv2.MORPH_CLOSE, _disk(2)) > 0
+    added = joined_to(both, own) & on_axis & ~own  # the closing only joins, adds nothing
+    if not added.any():
+        return mask
+    out = mask.copy()
+    out[y0:y1, x0:x1] |= added
+    return fill_holes(out)
 
 
 def within_table_columns(mask: np.ndarray, footprint: np.ndarray,
