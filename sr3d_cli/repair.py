@@ -11,6 +11,8 @@ it hides: the sensor's holes within :data:`HOLE_REACH` px of a mask and readings
 beyond it) seen through the object, farther than the mesh's surface. A mask that misses part of
 its object then still gets that part's depth; readings in front of the mesh (an occluder) and
 readings of the room above the table's plane (a wall behind a misplaced mesh) stay the sensor's.
+Holes within that reach the meshes do not cover (a glass's dropouts the mask and mesh miss) are
+inpainted from the depth around them (:func:`fill_holes_near`).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from sr3d_cli.render import RenderMesh, Renderer
 HOLE_REACH = 15  # px from a mask within which the placed mesh fills the sensor's holes
 BEHIND = 0.01  # m: a reading this much farther than the mesh's surface is seen through it
 ON_TABLE = 0.01  # m: a reading no nearer than the table's plane by this reads the table or beyond
+INPAINT_RADIUS = 5  # px: the neighbourhood OpenCV's inpainting takes each filled value from
 
 
 def placed_render_meshes(placed: list[tuple[int, object, np.ndarray, float]]) -> list[RenderMesh]:
@@ -49,6 +52,25 @@ def hidden_beyond(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
     return drawn & (((raw_m <= 0) & near_mask) | through)
 
 
+def fill_holes_near(depth: np.ndarray, masks: np.ndarray, reach: int = HOLE_REACH) -> None:
+    """Inpaint (OpenCV, Telea, millimetres) ``depth (H, W) float32`` metres in place where it is
+    0 within ``reach`` px of ``masks (H, W) bool``, from the depth around each hole, in a window
+    around them; holes farther away stay."""
+    off = (~masks).astype(np.uint8)
+    left = (depth <= 0) & (cv2.distanceTransform(off, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= reach)
+    if not left.any():
+        return
+    ys, xs = np.nonzero(left)
+    margin = reach + 2 * INPAINT_RADIUS
+    y0, y1 = max(int(ys.min()) - margin, 0), int(ys.max()) + margin + 1
+    x0, x1 = max(int(xs.min()) - margin, 0), int(xs.max()) + margin + 1
+    window = depth[y0:y1, x0:x1]
+    filled = cv2.inpaint(window * 1000, (window <= 0).astype(np.uint8), INPAINT_RADIUS,
+                         cv2.INPAINT_TELEA) / 1000
+    here = left[y0:y1, x0:x1]
+    window[here] = filled[here]
+
+
 def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
                   placed_ids: list[int], *, plane: Plane | None = None, K: np.ndarray | None = None,
                   outside_render: str = "nearest", max_gap: int = 6,
@@ -66,6 +88,7 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
     if beyond_mask and plane is not None and K is not None:
         hidden = hidden_beyond(raw_m, ids, render_depth, placed_ids, plane, K)
         out[hidden] = render_depth[hidden]
+        fill_holes_near(out, np.isin(ids, placed_ids))
     miss = inside & ~hit
     if not miss.any() or not hit.any():
         return out

@@ -303,3 +303,23 @@ def test_repair_beyond_the_mask_fills_what_the_mesh_hides_and_keeps_what_is_in_f
     assert np.all(filled[holes & (reach > 15)] == 0)  # far from every mask a hole stays one
     assert np.array_equal(filled[occluder], raw[occluder])
     assert np.array_equal(filled[~mask], raw[~mask])  # off the object: the sensor's depth
+
+
+def test_repair_inpaints_the_holes_near_a_mask_that_the_mesh_does_not_cover():
+    plane, T, scale, mask, raw, gt = _scene(12)
+    reach = ndimage.distance_transform_edt(~mask)
+    dropout = (reach > 3) & (reach <= 12)  # a ring of dropouts around the glass, on the table
+    far = (reach > 30) & (reach <= 40)
+    raw = raw.copy()
+    raw[dropout | far] = 0
+    render = make_renderer("numpy").render(
+        [RenderMesh(BOTTLE.vertices @ (scale * T[:3, :3]).T + T[:3, 3],
+                    np.asarray(BOTTLE.faces), 1)], CAMERA)
+    filled = compose_depth(raw, mask.astype(int), render.depth, [1], plane=plane, K=K,
+                           beyond_mask=True)
+    ring = dropout & (render.depth == 0)
+    assert ring.sum() > 1000
+    # measured: the ring's inpainted depth is 4.1 mm off the table's on average (26 mm at
+    # most, beside the glass); left as holes they count 745 mm
+    assert np.all(filled[ring] > 0) and np.abs(filled - gt)[ring].mean() < 0.006
+    assert np.all(filled[far] == 0)  # beyond the reach the holes stay
