@@ -576,13 +576,6 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     it (the real container's lid: a model 0.075-0.08 m tall for a 0.12 m container). Nothing
     else can hold readings inside the glass's own volume; an object beside or behind it lies
     farther from its axis. Lying or unfitted instances are returned unchanged."""
-    try:
-        fit = fit_revolution(mask, K, plane, depth=depth_m, options=FitOptions(square_starts=False))
-    except ValueError:
-        return mask
-    if fit.resting != "standing":
-        return mask
-    radius = float(fit.profile[:, 0].max()) * fit.height + ON_AXIS_MARGIN
     ys, xs = np.nonzero(mask)
     tall = int(ys.max() - ys.min() + 1)  # the window: the instance's box, as far again above
     y0, y1 = max(int(ys.min()) - tall, 0), int(ys.max()) + 1
@@ -592,14 +585,26 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     shifted[1, 2] -= y0
     depth = depth_m[y0:y1, x0:x1]
     points = depth_to_points(depth, shifted)
+    own = mask[y0:y1, x0:x1]
+
+    def joined(readings: np.ndarray) -> np.ndarray:  # the closing only joins, adds nothing
+        both = cv2.morphologyEx((readings | own).astype(np.uint8), cv2.MORPH_CLOSE, _disk(2))
+        return joined_to(both > 0, own) & readings & ~own
+
+    above = (depth > 0) & (plane.height(points) > BODY_SEED_HEIGHT)
+    if not joined(above).any():  # nothing to take in: no fit needed
+        return mask
+    try:
+        fit = fit_revolution(mask, K, plane, depth=depth_m, options=FitOptions(square_starts=False))
+    except ValueError:
+        return mask
+    if fit.resting != "standing":
+        return mask
+    radius = float(fit.profile[:, 0].max()) * fit.height + ON_AXIS_MARGIN
     offset = points - fit.base
     along = offset @ fit.axis
     across = np.linalg.norm(offset - along[..., None] * fit.axis, axis=-1)
-    on_axis = (depth > 0) & (plane.height(points) > BODY_SEED_HEIGHT) & (across <= radius) & \
-        (along <= ON_AXIS_REACH)
-    own = mask[y0:y1, x0:x1]
-    both = cv2.morphologyEx((on_axis | own).astype(np.uint8), cv2.MORPH_CLOSE, _disk(2)) > 0
-    added = joined_to(both, own) & on_axis & ~own  # the closing only joins, adds nothing
+    added = joined(above & (across <= radius) & (along <= ON_AXIS_REACH))
     if not added.any():
         return mask
     out = mask.copy()
