@@ -86,9 +86,20 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
     hit = inside & (render_depth > 0)
     out[hit] = render_depth[hit]
     if beyond_mask and plane is not None and K is not None:
-        hidden = hidden_beyond(raw_m, ids, render_depth, placed_ids, plane, K)
-        out[hidden] = render_depth[hidden]
-        fill_holes_near(out, np.isin(ids, placed_ids))
+        # in a window around the masks and meshes, wide enough for fill_holes_near's own
+        ys, xs = np.nonzero(inside | (render_depth > 0))
+        if ys.size:
+            m = 2 * (HOLE_REACH + INPAINT_RADIUS)
+            rows = slice(max(int(ys.min()) - m, 0), int(ys.max()) + m + 1)
+            cols = slice(max(int(xs.min()) - m, 0), int(xs.max()) + m + 1)
+            shifted = K.copy()
+            shifted[0, 2] -= cols.start
+            shifted[1, 2] -= rows.start
+            window, drawn = out[rows, cols], render_depth[rows, cols]
+            hidden = hidden_beyond(raw_m[rows, cols], ids[rows, cols], drawn, placed_ids, plane,
+                                   shifted)
+            window[hidden] = drawn[hidden]
+            fill_holes_near(window, inside[rows, cols])
     miss = inside & ~hit
     if not miss.any() or not hit.any():
         return out
