@@ -38,36 +38,41 @@ def placed_render_meshes(placed: list[tuple[int, object, np.ndarray, float]]) ->
             for k, mesh, T, scale in placed]
 
 
-def hidden_beyond(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
-                  placed_ids: list[int], plane: Plane, K: np.ndarray) -> np.ndarray:
-    """(H, W) bool: pixels outside every mask where the placed meshes hide the sensor's reading
-    (see the module docstring). raw_m, render_depth : (H, W) metres (0 = none); ids : (H, W)."""
-    drawn = (render_depth > 0) & (ids == 0)
+def _around(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
+    """Rows and columns of ``mask``'s (H, W) box widened by ``margin`` px, clipped to the image
+    (None for an empty mask)."""
+    ys, xs = np.nonzero(mask)
+    if not ys.size:
+        return None
+    return (slice(max(int(ys.min()) - margin, 0), int(ys.max()) + margin + 1),
+            slice(max(int(xs.min()) - margin, 0), int(xs.max()) + margin + 1))
+
+
+def hidden_beyond(raw_m: np.ndarray, outside: np.ndarray, render_depth: np.ndarray,
+                  near: np.ndarray, plane: Plane, K: np.ndarray) -> np.ndarray:
+    """(H, W) bool: pixels ``outside (H, W) bool`` every mask where the placed meshes hide the
+    sensor's reading (see the module docstring): its holes ``near (H, W) bool`` a mask and
+    readings of the table seen through them. raw_m, render_depth : (H, W) metres (0 = none)."""
+    drawn = (render_depth > 0) & outside
     if not drawn.any():
         return drawn
-    off = (~np.isin(ids, placed_ids)).astype(np.uint8)
-    near_mask = cv2.distanceTransform(off, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= HOLE_REACH
     table = plane.depth_image(raw_m.shape, K)
     through = (raw_m > render_depth + BEHIND) & (table > 0) & (raw_m >= table - ON_TABLE)
-    return drawn & (((raw_m <= 0) & near_mask) | through)
+    return drawn & (((raw_m <= 0) & near) | through)
 
 
-def fill_holes_near(depth: np.ndarray, masks: np.ndarray, reach: int = HOLE_REACH) -> None:
+def fill_holes_near(depth: np.ndarray, near: np.ndarray) -> None:
     """Inpaint (OpenCV, Telea, millimetres) ``depth (H, W) float32`` metres in place where it is
-    0 within ``reach`` px of ``masks (H, W) bool``, from the depth around each hole, in a window
-    around them; holes farther away stay."""
-    off = (~masks).astype(np.uint8)
-    left = (depth <= 0) & (cv2.distanceTransform(off, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= reach)
-    if not left.any():
+    0 and ``near (H, W) bool`` (within reach of a mask), from the depth around each hole, in a
+    window around them; other holes stay."""
+    left = (depth <= 0) & near
+    box = _around(left, HOLE_REACH + 2 * INPAINT_RADIUS)
+    if box is None:
         return
-    ys, xs = np.nonzero(left)
-    margin = reach + 2 * INPAINT_RADIUS
-    y0, y1 = max(int(ys.min()) - margin, 0), int(ys.max()) + margin + 1
-    x0, x1 = max(int(xs.min()) - margin, 0), int(xs.max()) + margin + 1
-    window = depth[y0:y1, x0:x1]
+    window = depth[box]
     filled = cv2.inpaint(window * 1000, (window <= 0).astype(np.uint8), INPAINT_RADIUS,
                          cv2.INPAINT_TELEA) / 1000
-    here = left[y0:y1, x0:x1]
+    here = left[box]
     window[here] = filled[here]
 
 
@@ -87,19 +92,17 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
     out[hit] = render_depth[hit]
     if beyond_mask and plane is not None and K is not None:
         # in a window around the masks and meshes, wide enough for fill_holes_near's own
-        ys, xs = np.nonzero(inside | (render_depth > 0))
-        if ys.size:
-            m = 2 * (HOLE_REACH + INPAINT_RADIUS)
-            rows = slice(max(int(ys.min()) - m, 0), int(ys.max()) + m + 1)
-            cols = slice(max(int(xs.min()) - m, 0), int(xs.max()) + m + 1)
+        box = _around(inside | (render_depth > 0), 2 * (HOLE_REACH + INPAINT_RADIUS))
+        if box is not None:
             shifted = K.copy()
-            shifted[0, 2] -= cols.start
-            shifted[1, 2] -= rows.start
-            window, drawn = out[rows, cols], render_depth[rows, cols]
-            hidden = hidden_beyond(raw_m[rows, cols], ids[rows, cols], drawn, placed_ids, plane,
-                                   shifted)
+            shifted[0, 2] -= box[1].start
+            shifted[1, 2] -= box[0].start
+            window, drawn = out[box], render_depth[box]
+            off = (~inside[box]).astype(np.uint8)
+            by_mask = cv2.distanceTransform(off, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= HOLE_REACH
+            hidden = hidden_beyond(raw_m[box], ids[box] == 0, drawn, by_mask, plane, shifted)
             window[hidden] = drawn[hidden]
-            fill_holes_near(window, inside[rows, cols])
+            fill_holes_near(window, by_mask)
     miss = inside & ~hit
     if not miss.any() or not hit.any():
         return out
