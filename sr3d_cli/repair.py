@@ -21,12 +21,12 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from sr3d_cli.geometry.camera import Camera
+from sr3d_cli.geometry.camera import Camera, window_K
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points
 from sr3d_cli.render import RenderMesh, Renderer
 
-HOLE_REACH = 15  # px from a mask within which the placed mesh fills the sensor's holes
+HOLE_REACH = 15  # px from a mask within which the sensor's holes are filled (mesh, else inpainted)
 BEHIND = 0.01  # m: a reading this much farther than the mesh's surface is seen through it
 ON_TABLE = 0.01  # m: a reading no nearer than the table's plane by this reads the table or beyond
 INPAINT_RADIUS = 5  # px: the neighbourhood OpenCV's inpainting takes each filled value from
@@ -94,13 +94,11 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
         # in a window around the masks and meshes, wide enough for fill_holes_near's own
         box = _around(inside | (render_depth > 0), 2 * (HOLE_REACH + INPAINT_RADIUS))
         if box is not None:
-            shifted = K.copy()
-            shifted[0, 2] -= box[1].start
-            shifted[1, 2] -= box[0].start
             window, drawn = out[box], render_depth[box]
             off = (~inside[box]).astype(np.uint8)
             by_mask = cv2.distanceTransform(off, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= HOLE_REACH
-            hidden = hidden_beyond(raw_m[box], ids[box] == 0, drawn, by_mask, plane, shifted)
+            hidden = hidden_beyond(raw_m[box], ids[box] == 0, drawn, by_mask, plane,
+                                   window_K(K, box[1].start, box[0].start))
             window[hidden] = drawn[hidden]
             fill_holes_near(window, by_mask)
     miss = inside & ~hit

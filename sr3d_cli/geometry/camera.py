@@ -72,6 +72,14 @@ class Camera:
                 "depth_scale": self.depth_scale}
 
 
+def window_K(K: np.ndarray, x0: int, y0: int) -> np.ndarray:
+    """Intrinsics ``(3, 3)`` of the image window whose top-left pixel is ``(x0, y0)``."""
+    out = np.array(K, dtype=np.float64)
+    out[0, 2] -= x0
+    out[1, 2] -= y0
+    return out
+
+
 def project(points_cam: np.ndarray, K: np.ndarray) -> np.ndarray:
     """Camera-frame points ``(n, 3)`` metres to pixels ``(n, 2)`` (u right, v down)."""
     points_cam = np.asarray(points_cam, dtype=np.float64)

@@ -40,7 +40,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from sr3d_cli.geometry.camera import depth_to_points, unproject
+from sr3d_cli.geometry.camera import depth_to_points, unproject, window_K
 from sr3d_cli.geometry.occlusion import down_direction, in_front
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, DEPTH_SAMPLES,
@@ -576,15 +576,14 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     it (the real container's lid: a model 0.075-0.08 m tall for a 0.12 m container). Nothing
     else can hold readings inside the glass's own volume; an object beside or behind it lies
     farther from its axis. Lying or unfitted instances are returned unchanged."""
+    if not mask.any():
+        return mask
     ys, xs = np.nonzero(mask)
     tall = int(ys.max() - ys.min() + 1)  # the window: the instance's box, as far again above
     y0, y1 = max(int(ys.min()) - tall, 0), int(ys.max()) + 1
     x0, x1 = max(int(xs.min()) - tall // 2, 0), min(int(xs.max()) + tall // 2 + 1, mask.shape[1])
-    shifted = K.copy()
-    shifted[0, 2] -= x0
-    shifted[1, 2] -= y0
     depth = depth_m[y0:y1, x0:x1]
-    points = depth_to_points(depth, shifted)
+    points = depth_to_points(depth, window_K(K, x0, y0))
     own = mask[y0:y1, x0:x1]
 
     def joined(readings: np.ndarray) -> np.ndarray:  # the closing only joins, adds nothing
@@ -595,7 +594,8 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     if not joined(above).any():  # nothing to take in: no fit needed
         return mask
     try:
-        fit = fit_revolution(mask, K, plane, depth=depth_m, options=FitOptions(square_starts=False))
+        fit = fit_revolution(mask, K, plane, depth=depth_m,
+                             options=FitOptions(square_starts=False))
     except ValueError:
         return mask
     if fit.resting != "standing":
