@@ -18,7 +18,7 @@ from sr3d_cli.io.images import read_mask
 from sr3d_cli.geometry.camera import depth_to_points
 from sr3d_cli.geometry.plane import support_plane
 from sr3d_cli.segment import Segmenter, import_masks
-from sr3d_cli.segment.training_free import with_parts_on_axis
+from sr3d_cli.segment.training_free import on_table_readings, with_parts_on_axis
 from tests import onnx_builders
 from tests.scenes import GLASS, generated_frame, solids_on_table
 
@@ -604,7 +604,7 @@ def test_a_glass_gets_its_opaque_cap_but_not_the_object_behind_it(behind):
     assert (cv2.dilate(obj.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)[other].sum() > 150
     glass = obj & (plane.height(depth_to_points(depth, K)) < 0.09)  # the cap reads, the glass not
     raw = np.where((obj & ~glass) | other, depth, 0.0)
-    found = with_parts_on_axis(glass, K, plane, raw)
+    found = with_parts_on_axis(glass, K, plane, raw, on_table_readings(raw, K, plane)[0])
 
     def iou(a, b):
         return (a & b).sum() / (a | b).sum()

@@ -561,14 +561,15 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
 
     joined = with_bodies(out, bodies, glass | ev.above, one_object)
     masks = [within_table_columns(c.mask, footprint) for c in joined]
-    return _without_overlaps([Candidate(with_parts_on_axis(m, K, plane, depth_m), c.score)
-                              for m, c in zip(masks, joined)])
+    return _without_overlaps([Candidate(with_parts_on_axis(m, K, plane, depth_m, ev.height),
+                                        c.score) for m, c in zip(masks, joined)])
 
 
-def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: np.ndarray
-                       ) -> np.ndarray:
+def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: np.ndarray,
+                       height: np.ndarray) -> np.ndarray:
     """A standing glass's instance ``(H, W) bool`` with its opaque parts: the raw readings
-    ``depth_m (H, W)`` metres above the table (over ``BODY_SEED_HEIGHT``) that lie within the
+    ``depth_m (H, W)`` metres above the table (``height (H, W)`` metres over it, 0 where no
+    reading, :func:`on_table_readings`; over ``BODY_SEED_HEIGHT``) that lie within the
     radius of the instance's fitted solid of revolution (plus :data:`ON_AXIS_MARGIN`) around
     its axis, up to :data:`ON_AXIS_REACH` along it, joined to the instance in the image.
 
@@ -582,15 +583,13 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     tall = int(ys.max() - ys.min() + 1)  # the window: the instance's box, as far again above
     y0, y1 = max(int(ys.min()) - tall, 0), int(ys.max()) + 1
     x0, x1 = max(int(xs.min()) - tall // 2, 0), min(int(xs.max()) + tall // 2 + 1, mask.shape[1])
-    depth = depth_m[y0:y1, x0:x1]
-    points = depth_to_points(depth, window_K(K, x0, y0))
     own = mask[y0:y1, x0:x1]
 
     def joined(readings: np.ndarray) -> np.ndarray:  # the closing only joins, adds nothing
         both = cv2.morphologyEx((readings | own).astype(np.uint8), cv2.MORPH_CLOSE, _disk(2))
         return joined_to(both > 0, own) & readings & ~own
 
-    above = (depth > 0) & (plane.height(points) > BODY_SEED_HEIGHT)
+    above = height[y0:y1, x0:x1] > BODY_SEED_HEIGHT
     if not joined(above).any():  # nothing to take in: no fit needed
         return mask
     try:
@@ -601,7 +600,7 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     if fit.resting != "standing":
         return mask
     radius = float(fit.profile[:, 0].max()) * fit.height + ON_AXIS_MARGIN
-    offset = points - fit.base
+    offset = depth_to_points(depth_m[y0:y1, x0:x1], window_K(K, x0, y0)) - fit.base
     along = offset @ fit.axis
     across = np.linalg.norm(offset - along[..., None] * fit.axis, axis=-1)
     added = joined(above & (across <= radius) & (along <= ON_AXIS_REACH))
