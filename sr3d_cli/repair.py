@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from sr3d_cli.geometry.camera import Camera, window_K
+from sr3d_cli.geometry.camera import Camera, mask_window, window_K
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points
 from sr3d_cli.render import RenderMesh, Renderer
@@ -36,16 +36,6 @@ def placed_render_meshes(placed: list[tuple[int, object, np.ndarray, float]]) ->
     """(id, trimesh, T_cam_obj, scale) -> camera-frame meshes for the renderer."""
     return [RenderMesh(place_points(mesh.vertices, T, scale), np.asarray(mesh.faces), int(k))
             for k, mesh, T, scale in placed]
-
-
-def _around(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
-    """Rows and columns of ``mask``'s (H, W) box widened by ``margin`` px, clipped to the image
-    (None for an empty mask)."""
-    ys, xs = np.nonzero(mask)
-    if not ys.size:
-        return None
-    return (slice(max(int(ys.min()) - margin, 0), int(ys.max()) + margin + 1),
-            slice(max(int(xs.min()) - margin, 0), int(xs.max()) + margin + 1))
 
 
 def hidden_beyond(raw_m: np.ndarray, outside: np.ndarray, render_depth: np.ndarray,
@@ -66,7 +56,7 @@ def fill_holes_near(depth: np.ndarray, near: np.ndarray) -> None:
     0 and ``near (H, W) bool`` (within reach of a mask), from the depth around each hole, in a
     window around them; other holes stay."""
     left = (depth <= 0) & near
-    box = _around(left, HOLE_REACH + 2 * INPAINT_RADIUS)
+    box = mask_window(left, HOLE_REACH + 2 * INPAINT_RADIUS)
     if box is None:
         return
     window = depth[box]
@@ -92,7 +82,7 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
     out[hit] = render_depth[hit]
     if beyond_mask and plane is not None and K is not None:
         # in a window around the masks and meshes, wide enough for fill_holes_near's own
-        box = _around(inside | (render_depth > 0), 2 * (HOLE_REACH + INPAINT_RADIUS))
+        box = mask_window(inside | (render_depth > 0), 2 * (HOLE_REACH + INPAINT_RADIUS))
         if box is not None:
             window, drawn = out[box], render_depth[box]
             off = (~inside[box]).astype(np.uint8)

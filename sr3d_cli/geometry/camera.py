@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 
@@ -70,6 +71,17 @@ class Camera:
     def to_json(self) -> dict:
         return {"K": self.K.tolist(), "width": self.width, "height": self.height,
                 "depth_scale": self.depth_scale}
+
+
+def mask_window(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
+    """Rows and columns of the box of ``mask``'s (H, W) bool set pixels widened by ``margin``
+    px, clipped to the image (None when none is set). cv2 scans a uint8 view of the image
+    without listing its pixels."""
+    x, y, w, h = cv2.boundingRect(np.ascontiguousarray(mask, dtype=bool).view(np.uint8))
+    if w == 0:
+        return None
+    return (slice(max(y - margin, 0), min(y + h + margin, mask.shape[0])),
+            slice(max(x - margin, 0), min(x + w + margin, mask.shape[1])))
 
 
 def window_K(K: np.ndarray, x0: int, y0: int) -> np.ndarray:

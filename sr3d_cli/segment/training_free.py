@@ -40,7 +40,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from sr3d_cli.geometry.camera import depth_to_points, unproject, window_K
+from sr3d_cli.geometry.camera import depth_to_points, mask_window, unproject, window_K
 from sr3d_cli.geometry.occlusion import down_direction, in_front
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, DEPTH_SAMPLES,
@@ -119,12 +119,10 @@ def fill_holes(mask: np.ndarray) -> np.ndarray:
     box is background joined to the image's border. An object's region is a small part of
     the frame."""
     mask = np.asarray(mask, bool)
-    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     out = np.zeros(mask.shape, bool)
-    y0, x0 = max(y - 1, 0), max(x - 1, 0)
-    y1, x1 = min(y + h + 1, mask.shape[0]), min(x + w + 1, mask.shape[1])
-    if w > 0:
-        out[y0:y1, x0:x1] = ndimage.binary_fill_holes(mask[y0:y1, x0:x1])
+    box = mask_window(mask, 1)
+    if box is not None:
+        out[box] = ndimage.binary_fill_holes(mask[box])
     return out
 
 
