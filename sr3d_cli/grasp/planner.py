@@ -42,7 +42,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sr3d_cli.geometry.camera import depth_normals, depth_to_points, project
+from sr3d_cli.geometry.camera import depth_normals, depth_to_points, project, unproject
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points, rotation_about
 from sr3d_cli.geometry.transforms import unit as _unit
@@ -102,7 +102,7 @@ def observed_cloud(depth_m: np.ndarray, K: np.ndarray, ids: np.ndarray,
     ranked = np.sort(np.where(same, around, np.inf), axis=1)
     count, rows = same.sum(axis=1), np.arange(len(z))
     z = (ranked[rows, (count - 1) // 2] + ranked[rows, count // 2]) / 2  # their median
-    pts = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=1)
+    pts = unproject(np.column_stack([u, v]), z, K)
     return Cloud(pts, np.zeros_like(pts), ids[v, u].astype(np.int64))
 
 
