@@ -575,12 +575,13 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     it (the real container's lid: a model 0.075-0.08 m tall for a 0.12 m container). Nothing
     else can hold readings inside the glass's own volume; an object beside or behind it lies
     farther from its axis. Lying or unfitted instances are returned unchanged."""
-    if not mask.any():
+    box = mask_window(mask, 0)
+    if box is None:
         return mask
-    ys, xs = np.nonzero(mask)
-    tall = int(ys.max() - ys.min() + 1)  # the window: the instance's box, as far again above
-    y0, y1 = max(int(ys.min()) - tall, 0), int(ys.max()) + 1
-    x0, x1 = max(int(xs.min()) - tall // 2, 0), min(int(xs.max()) + tall // 2 + 1, mask.shape[1])
+    rows, cols = box
+    tall = rows.stop - rows.start  # the window: the instance's box, as far again above
+    y0, y1 = max(rows.start - tall, 0), rows.stop
+    x0, x1 = max(cols.start - tall // 2, 0), min(cols.stop + tall // 2, mask.shape[1])
     own = mask[y0:y1, x0:x1]
 
     def joined(readings: np.ndarray) -> np.ndarray:  # the closing only joins, adds nothing
