@@ -136,6 +136,7 @@ class AlignConfig:
 class RepairConfig:
     outside_render: str = "nearest"
     beyond_mask: bool = True
+    keep_nearer: bool = True
 
 
 @dataclass

@@ -139,5 +139,5 @@ class Pipeline:
 
         depth = repair_frame(frame.depth_m, ids, frame.camera, self.renderer, placed,
                              plane=plane, outside_render=rcfg.outside_render,
-                             beyond_mask=rcfg.beyond_mask)
+                             beyond_mask=rcfg.beyond_mask, keep_nearer=rcfg.keep_nearer)
         return depth, ids

@@ -6,6 +6,12 @@ placed mesh does not cover take the nearest rendered depth within a few pixels
 (``outside_render: nearest``, the default), keep the sensor's reading (``keep``) or take the
 table's depth (``plane``). Objects that could not be placed are left untouched.
 
+A sensor reading inside a mask that lies more than :data:`NEARER` in front of the placed mesh
+stays (``keep_nearer``, the default): a depth camera reads the nearest surface on its ray, and
+through glass it reads farther (the table behind it), never nearer; a nearer reading is the
+object's own front surface, a cap or label the model misses, or an occluder, and it is a better
+estimate there than a model placed too far or drawn too small.
+
 Just outside the masks (``beyond_mask``, the default), the placed mesh also replaces the readings
 it hides: the sensor's holes within :data:`HOLE_REACH` px of a mask and readings of the table (or
 beyond it) seen through the object, farther than the mesh's surface. A mask that misses part of
@@ -28,6 +34,7 @@ from sr3d_cli.render import RenderMesh, Renderer
 
 HOLE_REACH = 15  # px from a mask within which the sensor's holes are filled (mesh, else inpainted)
 BEHIND = 0.01  # m: a reading this much farther than the mesh's surface is seen through it
+NEARER = 0.01  # m: a reading inside a mask this much nearer than the mesh's surface is kept
 ON_TABLE = 0.01  # m: a reading no nearer than the table's plane by this reads the table or beyond
 INPAINT_RADIUS = 5  # px: the neighbourhood OpenCV's inpainting takes each filled value from
 
@@ -69,17 +76,19 @@ def fill_holes_near(depth: np.ndarray, near: np.ndarray) -> None:
 def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
                   placed_ids: list[int], *, plane: Plane | None = None, K: np.ndarray | None = None,
                   outside_render: str = "nearest", max_gap: int = 6,
-                  beyond_mask: bool = False) -> np.ndarray:
+                  beyond_mask: bool = False, keep_nearer: bool = False) -> np.ndarray:
     """Repaired depth ``(H, W) float32`` metres.
 
     raw_m : sensor depth; ids : instance ids (H, W); render_depth : depth of the placed meshes
     (0 = empty); placed_ids : the objects that were placed; beyond_mask : also replace the
-    readings the meshes hide just outside the masks (needs ``plane`` and ``K``).
+    readings the meshes hide just outside the masks (needs ``plane`` and ``K``); keep_nearer :
+    keep the readings inside the masks that lie over :data:`NEARER` in front of the meshes.
     """
     out = raw_m.astype(np.float32).copy()
     inside = np.isin(ids, placed_ids)
     hit = inside & (render_depth > 0)
-    out[hit] = render_depth[hit]
+    replaced = hit & ~((raw_m > 0) & (raw_m < render_depth - NEARER)) if keep_nearer else hit
+    out[replaced] = render_depth[replaced]
     if beyond_mask and plane is not None and K is not None:
         # in a window around the masks and meshes, wide enough for fill_holes_near's own
         box = mask_window(inside | (render_depth > 0), 2 * (HOLE_REACH + INPAINT_RADIUS))
@@ -107,12 +116,13 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
 
 def repair_frame(raw_m: np.ndarray, ids: np.ndarray, camera: Camera, renderer: Renderer,
                  placed: list, *, plane: Plane | None = None, outside_render: str = "nearest",
-                 beyond_mask: bool = False) -> np.ndarray:
+                 beyond_mask: bool = False, keep_nearer: bool = False) -> np.ndarray:
     if not placed:
         return raw_m.astype(np.float32).copy()
     render = renderer.render(placed_render_meshes(placed), camera)
     return compose_depth(raw_m, ids, render.depth, [p[0] for p in placed], plane=plane,
-                         K=camera.K, outside_render=outside_render, beyond_mask=beyond_mask)
+                         K=camera.K, outside_render=outside_render, beyond_mask=beyond_mask,
+                         keep_nearer=keep_nearer)
 
 
 def plane_fill(raw_m: np.ndarray, mask: np.ndarray, plane: Plane, K: np.ndarray) -> np.ndarray:

@@ -323,3 +323,28 @@ def test_repair_inpaints_the_holes_near_a_mask_that_the_mesh_does_not_cover():
     # most, beside the glass); left as holes they count 745 mm
     assert np.all(filled[ring] > 0) and np.abs(filled - gt)[ring].mean() < 0.006
     assert np.all(filled[far] == 0)  # beyond the reach the holes stay
+
+
+def test_repair_keeps_the_readings_in_front_of_a_mesh_placed_too_far():
+    plane, T, scale, mask, raw, gt = _scene(12)
+    behind = make_renderer("numpy").render([_table_mesh(plane)], CAMERA).depth
+    rng = np.random.default_rng(3)
+    front = mask & (rng.random(mask.shape) < 0.5)  # half the glass reads its front surface
+    raw = np.where(mask, behind, raw)  # the rest shows the table through it
+    raw[front] = gt[front] + rng.normal(0, 0.002, front.sum())
+    far = 1.05  # the mesh placed 5% too far, drawn the same in the image
+    render = make_renderer("numpy").render(
+        [RenderMesh(BOTTLE.vertices @ (far * scale * T[:3, :3]).T + far * T[:3, 3],
+                    np.asarray(BOTTLE.faces), 1)], CAMERA)
+    ids = mask.astype(int)
+    drawn = compose_depth(raw, ids, render.depth, [1])
+    kept = compose_depth(raw, ids, render.depth, [1], keep_nearer=True)
+    on = front & (render.depth > 0)
+    through = mask & ~front & (render.depth > 0)
+    beyond = through & (raw > render.depth)  # the table read through the glass, behind the mesh
+    assert on.sum() > 500 and beyond.sum() > 500
+    assert np.abs(drawn - gt)[on].mean() > 0.02  # measured 30 mm: the mesh's error
+    assert np.abs(kept - gt)[on].mean() < 0.003  # measured 1.6 mm: the readings' own noise
+    assert np.array_equal(kept[beyond], drawn[beyond])  # through the glass: the mesh
+    # near its base the mesh placed too far sinks under the table, whose readings stay
+    assert np.abs(kept - gt)[through].mean() <= np.abs(drawn - gt)[through].mean()

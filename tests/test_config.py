@@ -139,7 +139,7 @@ def test_config_command_narrows_to_a_section_or_key_and_refuses_unknown_names(tm
     assert yaml.safe_load(_sr3d_config("synth.distance").output) == {
         "synth": {"distance": [0.35, 0.9]}}
     assert _sr3d_config("repair").output == (
-        "repair:\n  outside_render: nearest\n  beyond_mask: true\n")
+        "repair:\n  outside_render: nearest\n  beyond_mask: true\n  keep_nearer: true\n")
     # a tuning constant is printed where the layout holds it, by either name
     for name in ("segment.close_radius", "advanced.segment.close_radius"):
         assert yaml.safe_load(_sr3d_config(name, "--set", "segment.close_radius=9").output) == {
