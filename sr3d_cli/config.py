@@ -66,6 +66,7 @@ class SegmentConfig:
     rough_factor: float = 2.0
     grabcut_iterations: int = 4
     max_object_share: float = 0.25
+    stereo_baseline: float = 0.05
     min_score: float = 0.3
     import_dir: str = ""
     sam_encoder: str = ""
@@ -231,7 +232,8 @@ ADVANCED_SECTION = "advanced"
 # the tuning constants of each section (see the module docstring); every other key is user-facing
 ADVANCED: dict[str, tuple[str, ...]] = {
     "plane": ("threshold", "iterations", "min_share"),
-    "segment": ("close_radius", "rough_factor", "grabcut_iterations", "max_object_share"),
+    "segment": ("close_radius", "rough_factor", "grabcut_iterations", "max_object_share",
+                "stereo_baseline"),
     "reconstruct": ("levels", "iterations", "sections", "lying_margin", "use_depth", "depth_vote",
                     "axial_view", "smooth", "straight_wall", "open_top_ratio", "open_wall",
                     "open_base", "open_explains"),

@@ -612,3 +612,100 @@ def test_a_glass_gets_its_opaque_cap_but_not_the_object_behind_it(behind):
     # measured: the glass part alone 0.401, with its cap 1.000; nothing of the one behind
     assert iou(glass, obj) < 0.45 and iou(found, obj) > 0.99
     assert not (found & other).any()
+
+
+def _shadowed_scene():
+    """A table seen at 0.7-1 m, a glass (holes, a few patches of the table read through it)
+    and, 3 px to its right, a box standing 0.25 m proud of the table whose left side casts a
+    stereo shadow: a strip of holes as wide as its disparity step over the table."""
+    from sr3d_cli.geometry.plane import Plane
+
+    K = np.array([[500.0, 0, 160], [0, 500, 120], [0, 0, 1]])
+    n = np.array([0.0, -0.8, -0.6])  # towards the camera
+    plane = Plane(n, 0.5)
+    v, u = np.mgrid[0:240, 0:320]
+    rays = np.stack([(u - 160) / 500, (v - 120) / 500, np.ones_like(u, float)], -1)
+    table = -0.5 / (rays @ n)
+    rng = np.random.default_rng(1)
+    depth = table + rng.normal(0, 0.0005, table.shape)
+    box = (v >= 55) & (v < 185) & (u >= 200) & (u < 260)
+    depth[box] = table[box] - 0.25
+    step = 500 * 0.05 * (1 / (table - 0.25) - 1 / table)  # px per row, a 5 cm baseline
+    shadow = (v >= 55) & (v < 185) & (u < 200) & (u >= 200 - np.floor(step))
+    depth[shadow] = 0
+    glass = ((u - 137) / 40.0) ** 2 + ((v - 120) / 55.0) ** 2 <= 1  # right edge at u = 177
+    through = np.zeros_like(glass)
+    for cy, cx, r in ((100, 125, 9), (140, 150, 8), (115, 160, 6)):
+        through |= (v - cy) ** 2 + (u - cx) ** 2 < r * r  # the table read through the glass
+    depth[glass & ~through] = 0
+    rgb = np.full(depth.shape + (3,), 128, np.uint8)
+    rgb[glass & ~(((u - 137) / 38.0) ** 2 + ((v - 120) / 53.0) ** 2 <= 1)] = 200  # its rim
+    rgb[box] = 40
+    return K, plane, depth.astype(np.float32), rgb, glass & ~through, shadow
+
+
+def test_a_stereo_cameras_shadow_beside_a_box_is_no_glass():
+    """The strip of holes a stereo camera leaves along a nearer surface's left side, as wide as
+    its disparity step, is its shadow; the glass's own holes run between the table's readings
+    and are none. A frame shows such shadows when holes stand at the left of its depth steps
+    (a renderer or camera without them reads straight across). Segmented, the glass is the
+    one instance; taken as glass (no baseline), the shadow comes out as an object of its own."""
+    from sr3d_cli.segment import training_free
+
+    K, plane, depth, rgb, holes, shadow = _shadowed_scene()
+    assert shadow.sum() > 1500  # measured: 13-16 px wide over 130 rows
+    assert training_free.casts_stereo_shadows(depth, K[0, 0], 0.05)
+    table = depth.copy()  # the same box seen by a camera that casts no shadow: the table
+    table[shadow] = np.broadcast_to(depth[:, [5]], depth.shape)[shadow]  # read up to its side
+    assert not training_free.casts_stereo_shadows(table, K[0, 0], 0.05)
+    found = training_free.stereo_shadow(depth, K[0, 0], 0.05)
+    assert (found & shadow).sum() >= 0.97 * shadow.sum()
+    assert (found & holes).sum() == 0
+    assert (found & (depth > 0)).sum() == 0
+
+    def segmented(baseline):
+        return [c.mask for c in training_free.segment_training_free(
+            rgb, depth, K, plane, grabcut_iterations=0, stereo_baseline=baseline)]
+
+    v, u = np.mgrid[0:240, 0:320]
+    glass = ((u - 137) / 40.0) ** 2 + ((v - 120) / 55.0) ** 2 <= 1
+    (mask,) = segmented(0.05)
+    assert (mask & glass).sum() / (mask | glass).sum() > 0.9
+    assert (mask & shadow).sum() == 0
+    on_shadow = [m for m in segmented(0.0) if (m & shadow).sum() > 0.5 * m.sum()]
+    assert len(on_shadow) == 1 and (on_shadow[0] & shadow).sum() > 0.9 * shadow.sum()
+
+
+def test_a_band_of_dropouts_along_the_tables_far_edge_is_no_object(monkeypatch):
+    """Where the table ends against the room, a stereo camera often leaves a ragged band of
+    holes along the edge: it is no object (over half its pixels lie within
+    TABLE_EDGE_BAND px of the table footprint's edge); a glass on the table still is. Without
+    the rule the band comes out as an instance."""
+    from sr3d_cli.geometry.plane import Plane
+    from sr3d_cli.segment import training_free
+
+    K = np.array([[500.0, 0, 160], [0, 500, 120], [0, 0, 1]])
+    n = np.array([0.0, -0.8, -0.6])
+    plane = Plane(n, 0.5)
+    v, u = np.mgrid[0:240, 0:320]
+    rays = np.stack([(u - 160) / 500, (v - 120) / 500, np.ones_like(u, float)], -1)
+    depth = -0.5 / (rays @ n) + np.random.default_rng(1).normal(0, 0.0005, u.shape)
+    depth[v < 50] = 2.0  # the room beyond the table's far edge
+    rgb = np.full(depth.shape + (3,), 128, np.uint8)
+    rgb[v < 50] = (200, 190, 180)
+    band = (np.abs(v - 50) < 7 + 3 * np.sin(u / 9.0)) & (u > 40) & (u < 140)
+    depth[band] = 0
+    glass = ((u - 200) / 30.0) ** 2 + ((v - 150) / 45.0) ** 2 <= 1
+    depth[glass] = 0
+    rgb[glass & ~(((u - 200) / 28.0) ** 2 + ((v - 150) / 43.0) ** 2 <= 1)] = 200  # its rim
+    depth = depth.astype(np.float32)
+
+    def segmented():
+        return [c.mask for c in training_free.segment_training_free(
+            rgb, depth, K, plane, grabcut_iterations=0)]
+
+    (mask,) = segmented()
+    assert (mask & glass).sum() / (mask | glass).sum() > 0.9
+    monkeypatch.setattr(training_free, "TABLE_EDGE_SHARE", 1.0)
+    on_band = [m for m in segmented() if (m & band).sum() > 0.5 * m.sum()]
+    assert len(on_band) == 1 and (on_band[0] & band).sum() > 0.75 * band.sum()

@@ -189,7 +189,8 @@ class TrainingFree:
         found = segment_training_free(rgb_w, depth_w, K_w, plane, rough_factor=c.rough_factor,
                                       min_area=c.min_area, close_radius=c.close_radius,
                                       grabcut_iterations=c.grabcut_iterations,
-                                      max_object_share=c.max_object_share)
+                                      max_object_share=c.max_object_share,
+                                      stereo_baseline=c.stereo_baseline)
         return [to_full_size(f.mask, shape) for f in found], [f.score for f in found]
 
 

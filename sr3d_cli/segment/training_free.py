@@ -65,6 +65,13 @@ BORDER_REACH = 0.1  # share of the image width along its sides where holes may b
 # 0.5 m for a D415 at 1280 px); see evidence_maps
 ENCLOSED_SHARE = 0.8  # share of a gap's surroundings the region must hold to fill it (_enclosed)
 EDGE_REACH, EDGE_SHARE, EDGE_THIN = 8, 0.8, 4.0  # an opaque object's edge band (opaque_edges)
+SHADOW_STEP = 0.005  # m: a reading this much nearer than the one across a run of holes casts a
+# stereo shadow on it (stereo_shadow)
+SHADOW_SLACK = 1.0  # px added to the shadow's width (the reading's own edge, rounding)
+SHADOW_MIN_STEP, SHADOW_MIN_EDGES, SHADOW_SIGNATURE = 4.0, 20, 0.8  # casts_stereo_shadows
+TABLE_EDGE_BAND, TABLE_EDGE_SHARE = 8, 0.5  # an instance with over this share of its pixels
+# within this many px of the table footprint's edge is a band of dropouts along it (measured on
+# the shared real frames: the far edge's bands 0.59-0.77, objects at most 0.20)
 MIN_IMAGE_SHARE = 0.001  # least share of the image an instance covers (400 px at 848x480): the
 # clusters of dropouts a real stereo camera scatters over a plain table are smaller
 OPAQUE_COLOUR = 3.5  # median colour departure from the table around it (table_colour_departure)
@@ -320,12 +327,15 @@ class Evidence:
 
 
 def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_factor: float,
-                  max_object_share: float) -> Evidence:
+                  max_object_share: float, stereo_baseline: float) -> Evidence:
     """Glass evidence, opaque evidence, the table's footprint, the readings on and above the
     table, and the heights (:class:`Evidence`).
 
-    Glass: holes where the table should be seen, and readings above the table that are
-    ``rough_factor`` times rougher than the table at that depth. Opaque: smooth readings
+    Glass: holes where the table should be seen, except a stereo camera's shadows beside
+    nearer surfaces (:func:`stereo_shadow`, with ``stereo_baseline`` metres; 0: none; only in a
+    frame that shows them, :func:`casts_stereo_shadows`), and
+    readings above the table that are ``rough_factor`` times rougher than the table at that
+    depth. Opaque: smooth readings
     clearly above the table. Footprint: :func:`table_footprint`. On the table:
     :func:`on_table_readings`.
     """
@@ -348,11 +358,79 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     expected = table_noise_model(rough, depth_m, on_table)
     above = valid & (height > np.maximum(4 * expected, 0.004))
     is_rough = rough > rough_factor * expected
+    if stereo_baseline > 0 and casts_stereo_shadows(depth_m, float(K[0, 0]), stereo_baseline):
+        holes &= ~stereo_shadow(depth_m, float(K[0, 0]), stereo_baseline)
     glass = holes | (above & is_rough)
     opaque = above & ~is_rough
     opaque = cv2.morphologyEx(opaque.astype(np.uint8), cv2.MORPH_OPEN, _disk(2)) > 0
     glass &= ~opaque_edges(glass, opaque)
     return Evidence(glass, opaque, footprint, on_table, above & footprint, height)
+
+
+def _row_steps(depth_m: np.ndarray, fx: float, baseline: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Along each row, every reading against the previous reading to its left across a run of
+    holes (or none): ``(gap, step, nearer)`` ``(H, W)``: the holes between them (px), the
+    disparity step ``fx * baseline * (1/z - 1/z_left)`` (px) and whether the reading is nearer
+    than that on its left by :data:`SHADOW_STEP`. Pixels with no reading on their left, or
+    none of their own, have ``nearer`` False."""
+    H, W = depth_m.shape
+    valid = depth_m > 0
+    cols = np.broadcast_to(np.arange(W), (H, W))
+    last = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)
+    before = np.concatenate([np.full((H, 1), -1), last[:, :-1]], axis=1)
+    rows = np.broadcast_to(np.arange(H)[:, None], (H, W))
+    here = valid & (before >= 0)
+    z = np.where(here, depth_m, 1.0)
+    z_left = np.where(here, depth_m[rows, np.maximum(before, 0)], 1.0)
+    step = fx * baseline * (1 / z - 1 / z_left)
+    return cols - before - 1, step, here & (z < z_left - SHADOW_STEP)
+
+
+def casts_stereo_shadows(depth_m: np.ndarray, fx: float, baseline: float) -> bool:
+    """Whether the depth image ``(H, W)`` metres comes from a stereo camera that leaves
+    shadows: of the places where a reading lies nearer than the one to its left by a disparity
+    step of :data:`SHADOW_MIN_STEP` px or more (at least :data:`SHADOW_MIN_EDGES` of them),
+    :data:`SHADOW_SIGNATURE` have holes between them at least half that step wide. A stereo
+    camera cannot see both sides of such a step (measured: 0.98-1.00 on every shared real
+    D435/D415 frame); a renderer without that model, or a time-of-flight camera, reads straight
+    across most of them (extsim at most 0.30, sr3d's own generator at most 0.44)."""
+    gap, step, nearer = _row_steps(depth_m, fx, baseline)
+    edges = nearer & (step >= SHADOW_MIN_STEP)
+    count = int(edges.sum())
+    return count >= SHADOW_MIN_EDGES and \
+        float((gap[edges] >= 0.5 * step[edges]).mean()) >= SHADOW_SIGNATURE
+
+
+def stereo_shadow(depth_m: np.ndarray, fx: float, baseline: float) -> np.ndarray:
+    """``(H, W) bool``: the holes a stereo depth camera leaves beside a nearer surface.
+
+    The depth image is the left imager's view: next to the left side of a surface, the
+    left imager sees a strip of what lies behind it that the right imager does not, and no
+    depth can be matched there. Along each row, a hole is in that shadow when the reading that
+    ends its run on the right is nearer (by :data:`SHADOW_STEP`) than the one that starts it on
+    the left and the hole lies within the disparity step ``fx * baseline * (1/z_right -
+    1/z_left)`` (plus :data:`SHADOW_SLACK` px) of that reading. depth_m : (H, W) metres (0 =
+    none); fx : pixels; baseline : metres. A glass's own holes run between the table's readings
+    on both sides, so no step explains them: the cap of a container, a bottle's readable
+    front or an opaque object stops only the strip beside it.
+    """
+    H, W = depth_m.shape
+    gap, step, nearer = _row_steps(depth_m, fx, baseline)
+    cols = np.broadcast_to(np.arange(W), (H, W))
+    right = np.minimum.accumulate(np.where(depth_m > 0, cols, W)[:, ::-1], axis=1)[:, ::-1]
+    rows = np.broadcast_to(np.arange(H)[:, None], (H, W))
+    end = np.minimum(right, W - 1)  # the reading that ends each hole's run on the right
+    return (depth_m <= 0) & (right < W) & nearer[rows, end] & \
+        (right - cols <= step[rows, end] + SHADOW_SLACK)
+
+
+def along_table_edge(footprint: np.ndarray, reach: int) -> np.ndarray:
+    """``(H, W) bool``: pixels within ``reach`` px of the edge of the table's footprint
+    ``(H, W) bool``, on either side."""
+    inside = cv2.distanceTransform(footprint.astype(np.uint8), cv2.DIST_L2, 3)
+    outside = cv2.distanceTransform((~footprint).astype(np.uint8), cv2.DIST_L2, 3)
+    return np.where(footprint, inside, outside) <= reach
 
 
 def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, *, min_area: int,
@@ -515,15 +593,15 @@ def grabcut_refine(rgb: np.ndarray, candidate: np.ndarray, opaque: np.ndarray, *
 
 def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, plane: Plane, *,
                           rough_factor: float = 2.0, min_area: int = 150, close_radius: int = 6,
-                          grabcut_iterations: int = 4, max_object_share: float = 0.25
-                          ) -> list[Candidate]:
+                          grabcut_iterations: int = 4, max_object_share: float = 0.25,
+                          stereo_baseline: float = 0.05) -> list[Candidate]:
     """Instance candidates of transparent objects in one RGB-D frame.
 
     rgb : (H, W, 3) uint8; depth_m : (H, W) metres (0 = none); K : (3, 3); plane : the table.
     Returns candidates sorted by area (largest first); masks do not overlap.
     """
     ev = evidence_maps(depth_m, K, plane, rough_factor=rough_factor,
-                       max_object_share=max_object_share)
+                       max_object_share=max_object_share, stereo_baseline=stereo_baseline)
     glass, opaque, footprint, on_table = ev.glass, ev.opaque, ev.footprint, ev.on_table
     pieces = find_candidates(glass, opaque, min_area=min_area // 4, close_radius=close_radius)
     # an object stands on the table: most of a candidate lies over the table's footprint (a
@@ -559,8 +637,14 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
 
     joined = with_bodies(out, bodies, glass | ev.above, one_object)
     masks = [within_table_columns(c.mask, footprint) for c in joined]
+    # an object stands on the table; a band of dropouts along the table's edge, where the
+    # table meets the room, is none
+    edge = along_table_edge(footprint, TABLE_EDGE_BAND)
+    keep = [i for i, m in enumerate(masks) if not m.any() or edge[m].mean() <= TABLE_EDGE_SHARE]
+    masks, joined = [masks[i] for i in keep], [joined[i] for i in keep]
     return _without_overlaps([Candidate(with_parts_on_axis(m, K, plane, depth_m, ev.height),
                                         c.score) for m, c in zip(masks, joined)])
+
 
 
 def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: np.ndarray,
