@@ -269,9 +269,9 @@ def test_instances_preview_labels_each_instance_with_its_score():
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.521, 8 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
+    per true object mean 0.530, 9 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
     < 0.2 with every object) 0.36 per frame; without the stereo shadows and the table's edge
-    band (``stereo_baseline`` 0, ``TABLE_EDGE_SHARE`` 1) 0.485, 8 and 0.64; without the
+    band (``stereo_baseline`` 0, no ``along_table_edge``) 0.485, 8 and 0.64; without the
     standing bodies too (BODY_SEES_TABLE out of reach) 0.23, none and 0.91. The 8 views of the
     capped container: mean IoU 0.645 (0.619 without the shadows and the edge band, 0.589
     without its lid's readings joined either, ``with_parts_on_axis``)."""
@@ -294,7 +294,7 @@ def test_measured_on_the_shared_real_frames(realdata):
             frames += 1
     assert frames == 11 and len(best) == 16
     assert false / frames <= 0.5
-    assert np.mean(best) >= 0.5 and sum(v >= 0.5 for v in best) >= 7
+    assert np.mean(best) >= 0.51 and sum(v >= 0.5 for v in best) >= 8
     assert len(container) == 8 and np.mean(container) >= 0.63
 
 

@@ -636,10 +636,11 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
                                   close_radius=close_radius, min_area=min_area)) == 1
 
     joined = with_bodies(out, bodies, glass | ev.above, one_object)
-    masks = [within_table_columns(c.mask, footprint) for c in joined]
     # an object stands on the table; a band of dropouts along the table's edge, where the
-    # table meets the room, is none
+    # table meets the room, is none: beyond the table or along its edge an instance keeps only
+    # the columns above its base, and one lying mostly along the edge is dropped
     edge = along_table_edge(footprint, TABLE_EDGE_BAND)
+    masks = [within_table_columns(c.mask, footprint & ~edge) for c in joined]
     keep = [i for i, m in enumerate(masks) if not m.any() or edge[m].mean() <= TABLE_EDGE_SHARE]
     masks, joined = [masks[i] for i in keep], [joined[i] for i in keep]
     return _without_overlaps([Candidate(with_parts_on_axis(m, K, plane, depth_m, ev.height),
