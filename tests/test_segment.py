@@ -485,15 +485,9 @@ def test_a_glass_beside_a_can_does_not_take_in_the_table_between_them(monkeypatc
     """A glass (missing readings, some read through it) 9 px from an opaque can whose side
     casts a 4 px band of missing readings (a stereo camera's shadow): the glass's mask keeps
     out the table seen between them. Without the band given to the can, it takes them in."""
-    from sr3d_cli.geometry.plane import Plane
     from sr3d_cli.segment import training_free
 
-    K = np.array([[500.0, 0, 160], [0, 500, 120], [0, 0, 1]])
-    n = np.array([0.0, -0.8, -0.6])  # towards the camera
-    plane = Plane(n, 0.5)
-    v, u = np.mgrid[0:240, 0:320]
-    rays = np.stack([(u - 160) / 500, (v - 120) / 500, np.ones_like(u, float)], -1)
-    table = -0.5 / (rays @ n)
+    K, plane, u, v, table = _table_view()
     rng = np.random.default_rng(1)
     depth = table + rng.normal(0, 0.0005, table.shape)
     can = (v >= 55) & (v < 185) & (u >= 190) & (u < 250)
@@ -614,20 +608,32 @@ def test_a_glass_gets_its_opaque_cap_but_not_the_object_behind_it(behind):
     assert not (found & other).any()
 
 
-def _shadowed_scene():
-    """A table seen at 0.7-1 m, a glass (holes, a few patches of the table read through it)
-    and, 3 px to its right, a box standing 0.25 m proud of the table whose left side casts a
-    stereo shadow: a strip of holes as wide as its disparity step over the table."""
+def _table_view():
+    """A 320x240 camera (f = 500 px) over a table tilted towards it, seen at 0.7-1 m:
+    (K, plane, u, v, table) with ``u``, ``v`` the pixel grids and ``table`` (H, W) the table's
+    depth in metres."""
     from sr3d_cli.geometry.plane import Plane
 
     K = np.array([[500.0, 0, 160], [0, 500, 120], [0, 0, 1]])
     n = np.array([0.0, -0.8, -0.6])  # towards the camera
-    plane = Plane(n, 0.5)
     v, u = np.mgrid[0:240, 0:320]
     rays = np.stack([(u - 160) / 500, (v - 120) / 500, np.ones_like(u, float)], -1)
-    table = -0.5 / (rays @ n)
-    rng = np.random.default_rng(1)
-    depth = table + rng.normal(0, 0.0005, table.shape)
+    return K, Plane(n, 0.5), u, v, -0.5 / (rays @ n)
+
+
+def _segmented_masks(K, plane, depth, rgb, baseline: float = 0.05) -> list[np.ndarray]:
+    from sr3d_cli.segment import training_free
+
+    return [c.mask for c in training_free.segment_training_free(
+        rgb, depth, K, plane, grabcut_iterations=0, stereo_baseline=baseline)]
+
+
+def _shadowed_scene():
+    """A glass (holes, a few patches of the table read through it) on :func:`_table_view`'s
+    table and, 3 px to its right, a box standing 0.25 m proud of the table whose left side
+    casts a stereo shadow: a strip of holes as wide as its disparity step over the table."""
+    K, plane, u, v, table = _table_view()
+    depth = table + np.random.default_rng(1).normal(0, 0.0005, table.shape)
     box = (v >= 55) & (v < 185) & (u >= 200) & (u < 260)
     depth[box] = table[box] - 0.25
     step = 500 * 0.05 * (1 / (table - 0.25) - 1 / table)  # px per row, a 5 cm baseline
@@ -663,31 +669,23 @@ def test_a_stereo_cameras_shadow_beside_a_box_is_no_glass():
     assert (found & holes).sum() == 0
     assert (found & (depth > 0)).sum() == 0
 
-    def segmented(baseline):
-        return [c.mask for c in training_free.segment_training_free(
-            rgb, depth, K, plane, grabcut_iterations=0, stereo_baseline=baseline)]
-
     v, u = np.mgrid[0:240, 0:320]
     glass = ((u - 137) / 40.0) ** 2 + ((v - 120) / 55.0) ** 2 <= 1
-    (mask,) = segmented(0.05)
+    (mask,) = _segmented_masks(K, plane, depth, rgb)
     assert (mask & glass).sum() / (mask | glass).sum() > 0.9
     assert (mask & shadow).sum() == 0
-    on_shadow = [m for m in segmented(0.0) if (m & shadow).sum() > 0.5 * m.sum()]
+    on_shadow = [m for m in _segmented_masks(K, plane, depth, rgb, baseline=0.0)
+                 if (m & shadow).sum() > 0.5 * m.sum()]
     assert len(on_shadow) == 1 and (on_shadow[0] & shadow).sum() > 0.9 * shadow.sum()
 
 
 def _far_edge_scene(band_columns: tuple[int, int], glass_at: tuple[int, int, int, int]):
     """A table whose far edge (row 50) meets the room, with a ragged band of holes along it
     over ``band_columns`` and a glass (holes, a rim) of centre and half-axes ``glass_at``
-    (u, v, a, b) px; returns (K, plane, depth, rgb, band, glass)."""
-    from sr3d_cli.geometry.plane import Plane
-
-    K = np.array([[500.0, 0, 160], [0, 500, 120], [0, 0, 1]])
-    n = np.array([0.0, -0.8, -0.6])
-    plane = Plane(n, 0.5)
-    v, u = np.mgrid[0:240, 0:320]
-    rays = np.stack([(u - 160) / 500, (v - 120) / 500, np.ones_like(u, float)], -1)
-    depth = -0.5 / (rays @ n) + np.random.default_rng(1).normal(0, 0.0005, u.shape)
+    (u, v, a, b) px, on :func:`_table_view`'s table; returns (K, plane, depth, rgb, band,
+    glass)."""
+    K, plane, u, v, table = _table_view()
+    depth = table + np.random.default_rng(1).normal(0, 0.0005, u.shape)
     depth[v < 50] = 2.0  # the room beyond the table's far edge
     rgb = np.full(depth.shape + (3,), 128, np.uint8)
     rgb[v < 50] = (200, 190, 180)
@@ -701,13 +699,6 @@ def _far_edge_scene(band_columns: tuple[int, int], glass_at: tuple[int, int, int
     return K, plane, depth.astype(np.float32), rgb, band, glass
 
 
-def _segmented_masks(K, plane, depth, rgb) -> list[np.ndarray]:
-    from sr3d_cli.segment import training_free
-
-    return [c.mask for c in training_free.segment_training_free(rgb, depth, K, plane,
-                                                                grabcut_iterations=0)]
-
-
 def test_a_band_of_dropouts_along_the_tables_far_edge_is_no_object(monkeypatch):
     """Where the table ends against the room, a stereo camera often leaves a ragged band of
     holes along the edge: it is no object (over half its pixels lie within
@@ -719,7 +710,8 @@ def test_a_band_of_dropouts_along_the_tables_far_edge_is_no_object(monkeypatch):
     (mask,) = _segmented_masks(K, plane, depth, rgb)
     assert (mask & glass).sum() / (mask | glass).sum() > 0.9
     monkeypatch.setattr(training_free, "TABLE_EDGE_SHARE", 1.0)
-    on_band = [m for m in _segmented_masks(K, plane, depth, rgb) if (m & band).sum() > 0.5 * m.sum()]
+    on_band = [m for m in _segmented_masks(K, plane, depth, rgb)
+               if (m & band).sum() > 0.5 * m.sum()]
     assert len(on_band) == 1 and (on_band[0] & band).sum() > 0.5 * band.sum()
 
 

@@ -333,9 +333,8 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
 
     Glass: holes where the table should be seen, except a stereo camera's shadows beside
     nearer surfaces (:func:`stereo_shadow`, with ``stereo_baseline`` metres; 0: none; only in a
-    frame that shows them, :func:`casts_stereo_shadows`), and
-    readings above the table that are ``rough_factor`` times rougher than the table at that
-    depth. Opaque: smooth readings
+    frame that shows them, :func:`casts_stereo_shadows`), and readings above the table that
+    are ``rough_factor`` times rougher than the table at that depth. Opaque: smooth readings
     clearly above the table. Footprint: :func:`table_footprint`. On the table:
     :func:`on_table_readings`.
     """
@@ -416,7 +415,7 @@ def stereo_shadow(depth_m: np.ndarray, fx: float, baseline: float) -> np.ndarray
     front or an opaque object stops only the strip beside it.
     """
     H, W = depth_m.shape
-    gap, step, nearer = _row_steps(depth_m, fx, baseline)
+    _, step, nearer = _row_steps(depth_m, fx, baseline)
     cols = np.broadcast_to(np.arange(W), (H, W))
     right = np.minimum.accumulate(np.where(depth_m > 0, cols, W)[:, ::-1], axis=1)[:, ::-1]
     rows = np.broadcast_to(np.arange(H)[:, None], (H, W))
@@ -645,7 +644,6 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     masks, joined = [masks[i] for i in keep], [joined[i] for i in keep]
     return _without_overlaps([Candidate(with_parts_on_axis(m, K, plane, depth_m, ev.height),
                                         c.score) for m, c in zip(masks, joined)])
-
 
 
 def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: np.ndarray,
