@@ -332,9 +332,9 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     table, and the heights (:class:`Evidence`).
 
     Glass: holes where the table should be seen, except a stereo camera's shadows beside
-    nearer surfaces (:func:`stereo_shadow`, with ``stereo_baseline`` metres; 0: none; only in a
-    frame that shows them, :func:`casts_stereo_shadows`), and readings above the table that
-    are ``rough_factor`` times rougher than the table at that depth. Opaque: smooth readings
+    nearer surfaces in a frame that shows them (:func:`stereo_shadow`, with ``stereo_baseline``
+    metres; 0: none), and readings above the table that are ``rough_factor`` times rougher than
+    the table at that depth. Opaque: smooth readings
     clearly above the table. Footprint: :func:`table_footprint`. On the table:
     :func:`on_table_readings`.
     """
@@ -357,7 +357,7 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     expected = table_noise_model(rough, depth_m, on_table)
     above = valid & (height > np.maximum(4 * expected, 0.004))
     is_rough = rough > rough_factor * expected
-    if stereo_baseline > 0 and casts_stereo_shadows(depth_m, float(K[0, 0]), stereo_baseline):
+    if stereo_baseline > 0:
         holes &= ~stereo_shadow(depth_m, float(K[0, 0]), stereo_baseline)
     glass = holes | (above & is_rough)
     opaque = above & ~is_rough
@@ -386,15 +386,14 @@ def _row_steps(depth_m: np.ndarray, fx: float, baseline: float
     return cols - before - 1, step, here & (z < z_left - SHADOW_STEP)
 
 
-def casts_stereo_shadows(depth_m: np.ndarray, fx: float, baseline: float) -> bool:
-    """Whether the depth image ``(H, W)`` metres comes from a stereo camera that leaves
-    shadows: of the places where a reading lies nearer than the one to its left by a disparity
-    step of :data:`SHADOW_MIN_STEP` px or more (at least :data:`SHADOW_MIN_EDGES` of them),
-    :data:`SHADOW_SIGNATURE` have holes between them at least half that step wide. A stereo
-    camera cannot see both sides of such a step (measured: 0.98-1.00 on every shared real
-    D435/D415 frame); a renderer without that model, or a time-of-flight camera, reads straight
-    across most of them (extsim at most 0.30, sr3d's own generator at most 0.44)."""
-    gap, step, nearer = _row_steps(depth_m, fx, baseline)
+def casts_stereo_shadows(gap: np.ndarray, step: np.ndarray, nearer: np.ndarray) -> bool:
+    """Whether a depth image comes from a stereo camera that leaves shadows, by its
+    :func:`_row_steps`: of the places where a reading lies nearer than the one to its left by a
+    disparity step of :data:`SHADOW_MIN_STEP` px or more (at least :data:`SHADOW_MIN_EDGES` of
+    them), :data:`SHADOW_SIGNATURE` have holes between them at least half that step wide. A
+    stereo camera cannot see both sides of such a step (measured: 0.98-1.00 on every shared
+    real D435/D415 frame); a renderer without that model, or a time-of-flight camera, reads
+    straight across most of them (extsim at most 0.30, sr3d's own generator at most 0.44)."""
     edges = nearer & (step >= SHADOW_MIN_STEP)
     count = int(edges.sum())
     return count >= SHADOW_MIN_EDGES and \
@@ -402,7 +401,8 @@ def casts_stereo_shadows(depth_m: np.ndarray, fx: float, baseline: float) -> boo
 
 
 def stereo_shadow(depth_m: np.ndarray, fx: float, baseline: float) -> np.ndarray:
-    """``(H, W) bool``: the holes a stereo depth camera leaves beside a nearer surface.
+    """``(H, W) bool``: the holes a stereo depth camera leaves beside a nearer surface, in a
+    frame that shows such shadows (:func:`casts_stereo_shadows`; else none).
 
     The depth image is the left imager's view: next to the left side of a surface, the
     left imager sees a strip of what lies behind it that the right imager does not, and no
@@ -415,7 +415,9 @@ def stereo_shadow(depth_m: np.ndarray, fx: float, baseline: float) -> np.ndarray
     front or an opaque object stops only the strip beside it.
     """
     H, W = depth_m.shape
-    _, step, nearer = _row_steps(depth_m, fx, baseline)
+    gap, step, nearer = _row_steps(depth_m, fx, baseline)
+    if not casts_stereo_shadows(gap, step, nearer):
+        return np.zeros((H, W), bool)
     cols = np.broadcast_to(np.arange(W), (H, W))
     right = np.minimum.accumulate(np.where(depth_m > 0, cols, W)[:, ::-1], axis=1)[:, ::-1]
     rows = np.broadcast_to(np.arange(H)[:, None], (H, W))
