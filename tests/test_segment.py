@@ -615,10 +615,9 @@ def _table_view():
     from sr3d_cli.geometry.plane import Plane
 
     K = np.array([[500.0, 0, 160], [0, 500, 120], [0, 0, 1]])
-    n = np.array([0.0, -0.8, -0.6])  # towards the camera
+    plane = Plane(np.array([0.0, -0.8, -0.6]), 0.5)  # its normal towards the camera
     v, u = np.mgrid[0:240, 0:320]
-    rays = np.stack([(u - 160) / 500, (v - 120) / 500, np.ones_like(u, float)], -1)
-    return K, Plane(n, 0.5), u, v, -0.5 / (rays @ n)
+    return K, plane, u, v, plane.depth_image(u.shape, K)
 
 
 def _segmented_masks(K, plane, depth, rgb, baseline: float = 0.05) -> list[np.ndarray]:
