@@ -15,6 +15,7 @@ from sr3d_cli.errors import InputError
 from sr3d_cli.evaluate import instance_ious
 from sr3d_cli.segment import Segmenter, read_prompts, to_full_size, to_working_size
 from sr3d_cli.segment import training_free as tf
+from sr3d_cli.geometry.plane import Plane
 from tests.scenes import GLASS, K_TABLE, solids_on_table, table
 
 SHAPE = (480, 640)
@@ -152,6 +153,31 @@ def test_a_glass_read_smoothly_as_a_real_camera_does_is_found_whole(monkeypatch)
     assert _segment(rgb, depth).objects == []
 
 
+def test_a_bodys_mask_leaves_the_tables_bumps_beside_it(monkeypatch):
+    """A stereo camera reads bumps a few millimetres high on a plain table; three 8 mm bumps
+    touching a smoothly read glass join its body through the closing, but stand beside its
+    base, not over it, so its mask leaves them (without that rule a third of them is taken:
+    IoU 0.939 against 0.982)."""
+    rgb, depth, plane = _table_frame((150, 150, 150))
+    depth, ids = _smooth_front_glass(rgb, depth)
+    body = ids > 0
+    ys, xs = np.nonzero(body)
+    bumps = np.zeros(SHAPE, np.uint8)
+    for cx, cy in ((xs.min() - 6, ys.max() - 15), (xs.max() + 6, ys.max() - 30),
+                   (xs.max() + 6, (ys.min() + ys.max()) // 2)):
+        cv2.circle(bumps, (int(cx), int(cy)), 10, 1, -1)
+    bumps = (bumps > 0) & ~body
+    raised = Plane(plane.normal, plane.offset - 0.008).depth_image(SHAPE, K_TABLE)
+    noise = np.random.default_rng(1).normal(0, 0.001, SHAPE)
+    depth = np.where(bumps, raised + noise, depth)
+    found = _segment(rgb, depth)
+    assert len(found.objects) == 1
+    assert instance_ious(found.ids, ids)[1] > 0.97 and not (found.ids > 0)[bumps].any()
+    monkeypatch.setattr(tf, "over_feet", lambda readings, seeds, *args: readings)
+    loose = _segment(rgb, depth)
+    assert instance_ious(loose.ids, ids)[1] < 0.95 and (loose.ids > 0)[bumps].mean() > 0.25
+
+
 def test_an_instance_beyond_the_table_keeps_only_the_columns_above_its_base():
     """A glass standing at the table's far edge rises above it in the image; the room's missing
     readings joined to it beyond the edge, to one side, are not the glass."""
@@ -269,12 +295,13 @@ def test_instances_preview_labels_each_instance_with_its_score():
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.530, 9 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
-    < 0.2 with every object) 0.36 per frame; without the stereo shadows and the table's edge
-    band (``stereo_baseline`` 0, no ``along_table_edge``) 0.485, 8 and 0.64; without the
-    standing bodies too (BODY_SEES_TABLE out of reach) 0.23, none and 0.91. The 8 views of the
-    capped container: mean IoU 0.645 (0.619 without the shadows and the edge band, 0.589
-    without its lid's readings joined either, ``with_parts_on_axis``)."""
+    per true object mean 0.573, 10 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
+    < 0.2 with every object) 0.36 per frame; with the table's bumps kept in the standing bodies
+    (no ``over_feet``) 0.530, 9 and 0.36; without the stereo shadows and the table's edge band
+    too (``stereo_baseline`` 0, no ``along_table_edge``) 0.485, 8 and 0.64; without the
+    standing bodies (BODY_SEES_TABLE out of reach) 0.23, none and 0.91. The 8 views of the
+    capped container: mean IoU 0.715 (0.645 with the bumps, 0.619 without the shadows and the
+    edge band either, 0.589 without its lid's readings joined either, ``with_parts_on_axis``)."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
@@ -294,8 +321,8 @@ def test_measured_on_the_shared_real_frames(realdata):
             frames += 1
     assert frames == 11 and len(best) == 16
     assert false / frames <= 0.5
-    assert np.mean(best) >= 0.51 and sum(v >= 0.5 for v in best) >= 8
-    assert len(container) == 8 and np.mean(container) >= 0.63
+    assert np.mean(best) >= 0.55 and sum(v >= 0.5 for v in best) >= 10
+    assert len(container) == 8 and np.mean(container) >= 0.69
 
 
 def test_fill_holes_in_the_box_fills_what_scipy_fills():

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from sr3d_cli.geometry.camera import depth_to_points, mask_window, unproject, window_K
 from sr3d_cli.geometry.occlusion import down_direction, in_front
@@ -88,6 +89,8 @@ MAX_IMAGE_SHARE = 0.4  # most share of the image one instance covers: a region t
 # table or the room failing as a whole, not an object standing on it
 BODY_SEED_HEIGHT = 0.015  # metres over the table: a reading this high is an object, not the
 # correlated bumps a stereo camera reads on a plain table at 1 m (at most 12 mm on the real frames)
+BODY_FEET_REACH = 0.01  # metres: a body's low readings stand over its footprint within this of
+# the foot of its high ones (standing_bodies): a glass's wall and the sensor's noise at a metre
 BODY_HEIGHT = 0.025  # metres: the 95th percentile height of a standing body's readings
 BODY_SEES_TABLE = 0.15  # least share of a body's pixels that show the table's colour: a glass
 # shows what is behind it (real glass 0.20-0.93, opaque objects on the real frames 0.02-0.09)
@@ -434,8 +437,33 @@ def along_table_edge(footprint: np.ndarray, reach: int) -> np.ndarray:
     return np.where(footprint, inside, outside) <= reach
 
 
-def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, *, min_area: int,
-                    close_radius: int) -> list[np.ndarray]:
+def over_feet(readings: np.ndarray, seeds: np.ndarray, depth_m: np.ndarray, K: np.ndarray,
+              plane: Plane, reach: float) -> np.ndarray:
+    """``(H, W) bool``: the ``seeds`` and those of the ``readings`` whose foot on the table (the
+    point dropped along the table's normal) lies within ``reach`` metres of the foot of a seed
+    (both ``(H, W) bool`` over ``depth_m (H, W)`` metres, K ``(3, 3)``)."""
+    out = seeds.copy()
+    low = readings & ~seeds
+    if not low.any() or not seeds.any():
+        return out
+    points = depth_to_points(depth_m, K)
+
+    def feet(sel: np.ndarray) -> np.ndarray:
+        p = points[sel]
+        return p - plane.height(p)[:, None] * plane.normal
+
+    dist, _ = cKDTree(feet(seeds)).query(feet(low), distance_upper_bound=reach)
+    out[low] = np.isfinite(dist)
+    return out
+
+
+def _closed(mask: np.ndarray, radius: int) -> np.ndarray:
+    """``(H, W) bool`` closed with a disk of ``radius`` pixels and its holes filled."""
+    return fill_holes(cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(radius)) > 0)
+
+
+def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.ndarray,
+                    plane: Plane, *, min_area: int, close_radius: int) -> list[np.ndarray]:
     """Glass objects found by their readings over the table ``(H, W) bool`` each.
 
     A real stereo camera often reads a glass's front surface smoothly, so a standing glass
@@ -443,14 +471,24 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, *, min_a
     table's colour through itself (:data:`BODY_SEES_TABLE`) and that the sensor fails
     somewhere on it (:data:`BODY_HOLES`). A body: the readings clearly above the table joined
     to one at least :data:`BODY_SEED_HEIGHT` high (the table's own bumps never reach that),
-    closed and filled, at least ``min_area`` pixels and :data:`BODY_HEIGHT` tall.
+    closed and filled, at least ``min_area`` pixels and :data:`BODY_HEIGHT` tall; it is judged
+    by all of them.
+
+    Its mask keeps only the readings that stand over the object's own footprint: those at
+    least :data:`BODY_SEED_HEIGHT` high and the lower ones whose foot on the table lies
+    within :data:`BODY_FEET_REACH` of the foot of one of those (:func:`over_feet`), closed
+    and filled. A stereo camera's noise on a plain table leaves bumps a few millimetres high
+    all over it; those beside the object join it through the closing, but stand on the table
+    beside its base, not over it.
     """
-    seeded = joined_to(ev.above, ev.height > BODY_SEED_HEIGHT)
-    body = cv2.morphologyEx(seeded.astype(np.uint8), cv2.MORPH_CLOSE, _disk(close_radius)) > 0
-    body = ndimage.binary_fill_holes(body)
+    high = ev.height > BODY_SEED_HEIGHT
+    seeded = joined_to(ev.above, high)
+    body = _closed(seeded, close_radius)
     count, labels = cv2.connectedComponents(body.astype(np.uint8), connectivity=8)
     if count < 2:
         return []
+    own = _closed(over_feet(seeded, seeded & high, depth_m, K, plane, BODY_FEET_REACH),
+                  close_radius)
     departure = table_colour_departure(rgb, ev.on_table, window=SEE_THROUGH_WINDOW)
     valid = depth_m > 0
     out = []
@@ -465,7 +503,8 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, *, min_a
         known = departure[mask]
         known = known[np.isfinite(known)]
         if known.size and np.mean(known < TABLE_LIKE) >= BODY_SEES_TABLE:
-            out.append(mask)
+            kept = mask & own
+            out.append(kept if kept.sum() >= min_area else mask)
     return out
 
 
@@ -630,7 +669,7 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
         claimed |= c.mask
     out = [Candidate(grow_to_outline(c.mask, outline, close_radius=5,
                                      barred=claimed & ~c.mask), c.score) for c in kept]
-    bodies = standing_bodies(rgb, depth_m, ev, min_area=least, close_radius=close_radius)
+    bodies = standing_bodies(rgb, depth_m, ev, K, plane, min_area=least, close_radius=close_radius)
 
     def one_object(mask: np.ndarray) -> bool:
         return len(split_touching(mask, K, plane, depth=depth_m, glass=glass,
