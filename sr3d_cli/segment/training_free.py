@@ -29,7 +29,10 @@ The steps:
    dropout on a plain surface, :func:`shows_outline`); each kept instance grown to its colour
    outline (:func:`grow_to_outline`), as a real glass's depth evidence covers only part of it;
 8. a standing instance joined to the readings inside its fitted solid's volume above it (an
-   opaque cap or lid reads well and gives no glass evidence: :func:`with_parts_on_axis`).
+   opaque cap or lid reads well and gives no glass evidence: :func:`with_parts_on_axis`);
+9. in a frame from a stereo camera (:func:`casts_stereo_shadows`), each instance cut to the
+   hull of its colour outline (:func:`within_outline_hull`): the holes and bumps such a
+   camera leaves beside a glass show the table's plain colour.
 """
 
 from __future__ import annotations
@@ -83,6 +86,7 @@ COLOUR_WINDOW = 31  # pixels: the neighbourhood the table's local colour is take
 FAINT_COLOUR, FAINT_SHARE = 1.5, 0.02  # an instance is a dropout, not glass, when under this
 # share of the band around its edge departs from the table's colour by this much (shows_outline)
 OUTLINE_COLOUR = 2.5  # colour departure that marks a glass's outline, rim or highlight
+HULL_LEAST = 0.5  # least share of an instance its outline's hull must keep (within_outline_hull)
 OUTLINE_REACH = 25  # pixels around an instance searched for its outline (grow_to_outline)
 OPAQUE_BAND = 8  # pixels around opaque evidence an instance is not grown into
 MAX_IMAGE_SHARE = 0.4  # most share of the image one instance covers: a region that large is the
@@ -318,7 +322,8 @@ class Evidence:
 
     glass, opaque : bool, see :func:`evidence_maps`; footprint : bool, :func:`table_footprint`;
     on_table : bool, readings on the table; above : bool, readings clearly above the table
-    (rough or smooth); height : float metres over the table (0 where no reading).
+    (rough or smooth); height : float metres over the table (0 where no reading). stereo:
+    whether the frame shows a stereo camera's shadows (:func:`casts_stereo_shadows`).
     """
 
     glass: np.ndarray
@@ -327,6 +332,7 @@ class Evidence:
     on_table: np.ndarray
     above: np.ndarray
     height: np.ndarray
+    stereo: bool = False
 
 
 def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_factor: float,
@@ -360,13 +366,16 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     expected = table_noise_model(rough, depth_m, on_table)
     above = valid & (height > np.maximum(4 * expected, 0.004))
     is_rough = rough > rough_factor * expected
-    if stereo_baseline > 0:
-        holes &= ~stereo_shadow(depth_m, float(K[0, 0]), stereo_baseline)
+    shadow = stereo_shadow(depth_m, float(K[0, 0]), stereo_baseline) \
+        if stereo_baseline > 0 else None
+    if shadow is not None:
+        holes &= ~shadow
     glass = holes | (above & is_rough)
     opaque = above & ~is_rough
     opaque = cv2.morphologyEx(opaque.astype(np.uint8), cv2.MORPH_OPEN, _disk(2)) > 0
     glass &= ~opaque_edges(glass, opaque)
-    return Evidence(glass, opaque, footprint, on_table, above & footprint, height)
+    return Evidence(glass, opaque, footprint, on_table, above & footprint, height,
+                    stereo=shadow is not None)
 
 
 def _row_steps(depth_m: np.ndarray, fx: float, baseline: float
@@ -403,9 +412,9 @@ def casts_stereo_shadows(gap: np.ndarray, step: np.ndarray, nearer: np.ndarray) 
         float((gap[edges] >= 0.5 * step[edges]).mean()) >= SHADOW_SIGNATURE
 
 
-def stereo_shadow(depth_m: np.ndarray, fx: float, baseline: float) -> np.ndarray:
+def stereo_shadow(depth_m: np.ndarray, fx: float, baseline: float) -> np.ndarray | None:
     """``(H, W) bool``: the holes a stereo depth camera leaves beside a nearer surface, in a
-    frame that shows such shadows (:func:`casts_stereo_shadows`; else none).
+    frame that shows such shadows (:func:`casts_stereo_shadows`; else None).
 
     The depth image is the left imager's view: next to the left side of a surface, the
     left imager sees a strip of what lies behind it that the right imager does not, and no
@@ -420,7 +429,7 @@ def stereo_shadow(depth_m: np.ndarray, fx: float, baseline: float) -> np.ndarray
     H, W = depth_m.shape
     gap, step, nearer = _row_steps(depth_m, fx, baseline)
     if not casts_stereo_shadows(gap, step, nearer):
-        return np.zeros((H, W), bool)
+        return None
     cols = np.broadcast_to(np.arange(W), (H, W))
     right = np.minimum.accumulate(np.where(depth_m > 0, cols, W)[:, ::-1], axis=1)[:, ::-1]
     rows = np.broadcast_to(np.arange(H)[:, None], (H, W))
@@ -683,8 +692,10 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     masks = [within_table_columns(c.mask, footprint & ~edge) for c in joined]
     keep = [i for i, m in enumerate(masks) if not m.any() or edge[m].mean() <= TABLE_EDGE_SHARE]
     masks, joined = [masks[i] for i in keep], [joined[i] for i in keep]
-    return _without_overlaps([Candidate(with_parts_on_axis(m, K, plane, depth_m, ev.height),
-                                        c.score) for m, c in zip(masks, joined)])
+    masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height) for m in masks]
+    if ev.stereo:  # a stereo camera's holes and bumps beside a glass: within its outline
+        masks = [within_outline_hull(m, outline, departure, ev.height) for m in masks]
+    return _without_overlaps([Candidate(m, c.score) for m, c in zip(masks, joined)])
 
 
 def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: np.ndarray,
@@ -732,6 +743,33 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     out = mask.copy()
     out[y0:y1, x0:x1] |= added
     return fill_holes(out)
+
+
+def within_outline_hull(mask: np.ndarray, outline: np.ndarray, departure: np.ndarray,
+                        height: np.ndarray, band: int = 3) -> np.ndarray:
+    """An instance ``(H, W) bool`` cut to the convex hull of its colour outline: the
+    ``outline`` evidence ``(H, W) bool`` (:func:`outline_evidence`) within ``band`` pixels of
+    it. What lies outside the hull stays where its colour departs from the table's
+    (``departure`` ``(H, W)``, :func:`table_colour_departure`, over :data:`OUTLINE_COLOUR`) or
+    its reading stands clearly above the table (``height`` ``(H, W)`` metres, over
+    :data:`BODY_SEED_HEIGHT`); only the parts joined to the hull are kept. Unchanged where the
+    cut would keep less than :data:`HULL_LEAST` of the instance (an outline seen in part).
+
+    A stereo camera leaves holes beside an object that no step between readings explains
+    where the glass's own edge is not read either (ClearGrasp's bottles against the far table:
+    shadows up to 75 px wide), and reads bumps on a plain table around it; they join the
+    glass's instance by its holes and readings, but show the table's plain colour outside its
+    outline, rim and highlights."""
+    near = cv2.dilate(mask.astype(np.uint8), _disk(band)) > 0
+    points = np.argwhere(outline & near)[:, ::-1].astype(np.int32)
+    if len(points) < 3:
+        return mask
+    hull = np.zeros(mask.shape, np.uint8)
+    cv2.fillConvexPoly(hull, cv2.convexHull(points), 1)
+    inside = mask & (hull > 0)
+    own = (np.nan_to_num(departure, nan=0.0) > OUTLINE_COLOUR) | (height > BODY_SEED_HEIGHT)
+    kept = joined_to(fill_holes(inside | (mask & own)) & mask, inside)
+    return kept if kept.sum() >= HULL_LEAST * mask.sum() else mask
 
 
 def within_table_columns(mask: np.ndarray, footprint: np.ndarray,
