@@ -189,17 +189,18 @@ def test_an_instance_is_cut_to_its_outlines_hull_keeping_its_own_colour_and_read
     band = (u >= 40) & (u < 72) & (v >= 60) & (v < 140) & ~glass
     departure = np.where(rim, 6.0, 0.5)
     height = np.zeros(glass.shape)
-    cut = tf.within_outline_hull(glass | band, rim, departure, height)
+    cut = tf.within_outline_hull(glass | band, rim, tf.own_pixels(departure, height))
     assert (cut >= glass).all()  # measured: 20 of the 2528 band pixels kept, along the
     assert (cut & band).sum() <= 0.01 * band.sum()  # hull's straight edges
     label = band & (v < 80)
     cap = band & (v >= 120)
     departure[label], height[cap] = 4.0, 0.03
-    cut = tf.within_outline_hull(glass | band, rim, departure, height)
+    cut = tf.within_outline_hull(glass | band, rim, tf.own_pixels(departure, height))
     assert (cut >= glass | label | cap).all()
     assert (cut & band & ~label & ~cap).sum() <= 0.01 * band.sum()
     arc = rim & (u > 120)  # the rim seen on its right edge only
-    part = tf.within_outline_hull(glass | band, arc, np.where(arc, 6.0, 0.5), np.zeros_like(height))
+    part = tf.within_outline_hull(glass | band, arc,
+                                  tf.own_pixels(np.where(arc, 6.0, 0.5), np.zeros_like(height)))
     assert (part == (glass | band)).all()
 
 

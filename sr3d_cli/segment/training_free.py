@@ -140,6 +140,11 @@ def fill_holes(mask: np.ndarray) -> np.ndarray:
     return out
 
 
+def _closed(mask: np.ndarray, radius: int) -> np.ndarray:
+    """``(H, W) bool`` closed with a disk of ``radius`` pixels and its holes filled."""
+    return fill_holes(cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(radius)) > 0)
+
+
 def _disk(radius: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
@@ -308,9 +313,7 @@ def grow_to_outline(mask: np.ndarray, outline: np.ndarray, *, close_radius: int,
     taken.
     """
     near = cv2.dilate(mask.astype(np.uint8), _disk(reach)) > 0
-    grown = mask | (near & outline)
-    grown = cv2.morphologyEx(grown.astype(np.uint8), cv2.MORPH_CLOSE, _disk(close_radius)) > 0
-    grown = fill_holes(grown)
+    grown = _closed(mask | (near & outline), close_radius)
     if barred is not None:
         grown &= ~barred
     return joined_to(grown, mask)
@@ -455,20 +458,15 @@ def over_feet(readings: np.ndarray, seeds: np.ndarray, depth_m: np.ndarray, K: n
     low = readings & ~seeds
     if not low.any() or not seeds.any():
         return out
-    points = depth_to_points(depth_m, K)
 
     def feet(sel: np.ndarray) -> np.ndarray:
-        p = points[sel]
+        ys, xs = np.nonzero(sel)
+        p = unproject(np.column_stack([xs, ys]), depth_m[ys, xs], K)
         return p - plane.height(p)[:, None] * plane.normal
 
     dist, _ = cKDTree(feet(seeds)).query(feet(low), distance_upper_bound=reach)
     out[low] = np.isfinite(dist)
     return out
-
-
-def _closed(mask: np.ndarray, radius: int) -> np.ndarray:
-    """``(H, W) bool`` closed with a disk of ``radius`` pixels and its holes filled."""
-    return fill_holes(cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(radius)) > 0)
 
 
 def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.ndarray,
@@ -694,7 +692,8 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     masks, joined = [masks[i] for i in keep], [joined[i] for i in keep]
     masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height) for m in masks]
     if ev.stereo:  # a stereo camera's holes and bumps beside a glass: within its outline
-        masks = [within_outline_hull(m, outline, departure, ev.height) for m in masks]
+        own = own_pixels(departure, ev.height)
+        masks = [within_outline_hull(m, outline, own) for m in masks]
     return _without_overlaps([Candidate(m, c.score) for m, c in zip(masks, joined)])
 
 
@@ -745,15 +744,14 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     return fill_holes(out)
 
 
-def within_outline_hull(mask: np.ndarray, outline: np.ndarray, departure: np.ndarray,
-                        height: np.ndarray, band: int = 3) -> np.ndarray:
+def within_outline_hull(mask: np.ndarray, outline: np.ndarray, own: np.ndarray,
+                        band: int = 3) -> np.ndarray:
     """An instance ``(H, W) bool`` cut to the convex hull of its colour outline: the
     ``outline`` evidence ``(H, W) bool`` (:func:`outline_evidence`) within ``band`` pixels of
-    it. What lies outside the hull stays where its colour departs from the table's
-    (``departure`` ``(H, W)``, :func:`table_colour_departure`, over :data:`OUTLINE_COLOUR`) or
-    its reading stands clearly above the table (``height`` ``(H, W)`` metres, over
-    :data:`BODY_SEED_HEIGHT`); only the parts joined to the hull are kept. Unchanged where the
-    cut would keep less than :data:`HULL_LEAST` of the instance (an outline seen in part).
+    it. What lies outside the hull stays where it is an object's ``own`` ``(H, W) bool``
+    (:func:`own_pixels`: its own colour, or a reading clearly above the table); only the parts
+    joined to the hull are kept. Unchanged where the cut would keep less than
+    :data:`HULL_LEAST` of the instance (an outline seen in part).
 
     A stereo camera leaves holes beside an object that no step between readings explains
     where the glass's own edge is not read either (ClearGrasp's bottles against the far table:
@@ -767,9 +765,16 @@ def within_outline_hull(mask: np.ndarray, outline: np.ndarray, departure: np.nda
     hull = np.zeros(mask.shape, np.uint8)
     cv2.fillConvexPoly(hull, cv2.convexHull(points), 1)
     inside = mask & (hull > 0)
-    own = (np.nan_to_num(departure, nan=0.0) > OUTLINE_COLOUR) | (height > BODY_SEED_HEIGHT)
     kept = joined_to(fill_holes(inside | (mask & own)) & mask, inside)
     return kept if kept.sum() >= HULL_LEAST * mask.sum() else mask
+
+
+def own_pixels(departure: np.ndarray, height: np.ndarray) -> np.ndarray:
+    """``(H, W) bool``: pixels that are an object's own, not the table's: colour departing from
+    the table's (``departure`` ``(H, W)``, :func:`table_colour_departure`, over
+    :data:`OUTLINE_COLOUR`) or a reading clearly above it (``height`` ``(H, W)`` metres over
+    the table, over :data:`BODY_SEED_HEIGHT`)."""
+    return (np.nan_to_num(departure, nan=0.0) > OUTLINE_COLOUR) | (height > BODY_SEED_HEIGHT)
 
 
 def within_table_columns(mask: np.ndarray, footprint: np.ndarray,
@@ -914,9 +919,7 @@ def _evidence_cuts(region: np.ndarray, glass: np.ndarray, min_area: int, close_r
     nearest = _nearest_seed(np.where(np.isin(labels, big), labels, 0))
     parts = []
     for k in big:
-        body = cv2.morphologyEx((labels == k).astype(np.uint8), cv2.MORPH_CLOSE,
-                                _disk(close_radius))
-        parts.append(region & (nearest == k) & fill_holes(body))
+        parts.append(region & (nearest == k) & _closed(labels == k, close_radius))
     rest = [(a, region & (nearest != k)) for a, k in zip(parts, big)]
     if len(parts) == 2:
         return [(parts[0], parts[1])], rest
@@ -1379,9 +1382,7 @@ def merge_pieces(pieces: list[np.ndarray], shape: tuple[int, int], *, radius: in
     count, labels = cv2.connectedComponents(groups, connectivity=8)
     out, taken = [], np.zeros(shape, bool)
     for k in range(1, count):
-        region = (union > 0) & (labels == k)
-        region = cv2.morphologyEx(region.astype(np.uint8), cv2.MORPH_CLOSE, _disk(radius)) > 0
-        region = fill_holes(region) & ~taken
+        region = _closed((union > 0) & (labels == k), radius) & ~taken
         taken |= region
         out.append(region)
     return out
