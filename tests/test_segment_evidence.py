@@ -13,9 +13,9 @@ import pytest
 from sr3d_cli.config import PlaneConfig, SegmentConfig
 from sr3d_cli.errors import InputError
 from sr3d_cli.evaluate import instance_ious
+from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.segment import Segmenter, read_prompts, to_full_size, to_working_size
 from sr3d_cli.segment import training_free as tf
-from sr3d_cli.geometry.plane import Plane
 from tests.scenes import GLASS, K_TABLE, solids_on_table, table
 
 SHAPE = (480, 640)
@@ -324,11 +324,12 @@ def test_measured_on_the_shared_real_frames(realdata):
     per true object mean 0.637, 13 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
     < 0.2 with every object) 0.36 per frame; not cut to the outline's hull
     (``within_outline_hull``) 0.573, 10 and 0.36; with the table's bumps kept in the standing
-    bodies too (no ``over_feet``) 0.530, 9 and 0.36; without the stereo shadows and the table's edge band
-    too (``stereo_baseline`` 0, no ``along_table_edge``) 0.485, 8 and 0.64; without the
-    standing bodies (BODY_SEES_TABLE out of reach) 0.23, none and 0.91. The 8 views of the
-    capped container: mean IoU 0.781 (0.715 not cut to the hull, 0.645 with the bumps, 0.619 without the shadows and the
-    edge band either, 0.589 without its lid's readings joined either, ``with_parts_on_axis``)."""
+    bodies too (no ``over_feet``) 0.530, 9 and 0.36; without the stereo shadows and the table's
+    edge band too (``stereo_baseline`` 0, no ``along_table_edge``) 0.485, 8 and 0.64; without
+    the standing bodies (BODY_SEES_TABLE out of reach) 0.23, none and 0.91. The 8 views of the
+    capped container: mean IoU 0.781 (0.715 not cut to the hull, 0.645 with the bumps, 0.619
+    without the shadows and the edge band either, 0.589 without its lid's readings joined
+    either, ``with_parts_on_axis``)."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
