@@ -117,7 +117,7 @@ class AlignConfig:
     contact_points: int = 30
     top_candidates: int = 3
     upright_prior: float = 0.05
-    hint_accept: float = 0.9
+    hint_accept: float = 0.75
     refine: bool = True
     refine_evals: int = 80
     refine_hint: bool = False

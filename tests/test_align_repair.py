@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import cv2
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -228,6 +229,47 @@ def test_a_glass_partly_hidden_by_one_in_front_keeps_its_place_when_its_occluder
     assert np.linalg.norm(placed.t - true_base) < 0.01
     assert np.linalg.norm(plain.t - true_base) > np.linalg.norm(placed.t - true_base) + 0.002
     assert placed.scale == pytest.approx(0.1, rel=0.1)
+
+
+def _ragged(true: np.ndarray, blobs: int, radius: int, rng: np.random.Generator
+            ) -> np.ndarray:
+    """``true (H, W) bool`` with ``blobs`` discs of up to ``radius`` px added or cut at random
+    points of its outline, as a segmenter's real mask runs over and short of the glass."""
+    edge = true & ~ndimage.binary_erosion(true, np.ones((3, 3), bool))
+    ey, ex = np.nonzero(edge)
+    mask = true.astype(np.uint8)
+    for k in rng.choice(len(ey), blobs, replace=False):
+        cv2.circle(mask, (int(ex[k]), int(ey[k])), int(rng.integers(radius // 2, radius + 1)),
+                   int(rng.random() < 0.5), -1)
+    return mask > 0
+
+
+@pytest.mark.parametrize("blobs, radius, searched", [(20, 9, False), (30, 12, True)])
+def test_the_reconstruction_pose_is_kept_without_search_where_its_fit_draws_the_mask(
+        blobs, radius, searched):
+    """A glass's mask ragged along its outline: with 20 blobs of up to 9 px the fit draws it to
+    IoU 0.88 and its pose is kept as it is (2 silhouettes drawn, the base 6.5 mm from the
+    truth); with 30 of up to 12 px it draws it to 0.73, under ``hint_accept``, and view
+    matching searches (over 100 silhouettes; 11 mm)."""
+    from sr3d_cli.config import ReconstructConfig
+    from sr3d_cli.reconstruct import Reconstructor
+    from tests.scenes import GLASS, solids_on_table, table_point
+
+    ids, K, plane, depth = solids_on_table([(GLASS, 0.1, 0.0, 0.0)])
+    rng = np.random.default_rng(1)
+    mask = _ragged(ids == 1, blobs, radius, rng)
+    sparse = np.where(rng.random(depth.shape) < 0.3, depth, 0.0)
+    rec = Reconstructor(ReconstructConfig())(np.zeros((*ids.shape, 3), np.uint8), mask, K,
+                                             plane, depth=sparse)
+    hint = (np.asarray(rec.meta["pose_hint"]["T_cam_obj"]), rec.meta["pose_hint"]["scale"])
+    cfg = AlignConfig()
+    assert (rec.meta["silhouette_iou"] < cfg.hint_accept) == searched
+    placed = Aligner(cfg)(rec.mesh, mask, K, plane, sparse, hint=hint)
+    d = placed.diagnostics
+    assert (d["candidates"] > 0) == searched
+    assert d["renders"] > 100 if searched else d["renders"] <= 2
+    assert np.linalg.norm(placed.t - table_point(plane, 0.0, 0.0)) < (0.015 if searched else 0.01)
+    assert placed.scale == pytest.approx(0.1, rel=0.15)
 
 
 WRONG_RADIUS = 1.15  # the model's radius 15% off the true one: a shape scale cannot fix
