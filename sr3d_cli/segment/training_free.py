@@ -610,7 +610,8 @@ def find_candidates(glass: np.ndarray, opaque: np.ndarray, *, min_area: int,
 
 def grabcut_refine(rgb: np.ndarray, candidate: np.ndarray, opaque: np.ndarray, *,
                    iterations: int, margin: int = 20) -> np.ndarray:
-    """Refine one candidate ``(H, W) bool`` with GrabCut in a window around it."""
+    """Refine one candidate ``(H, W) bool`` with GrabCut in a window around it; the result
+    holds the whole candidate (GrabCut only adds to it)."""
     h, w = candidate.shape
     ys, xs = np.nonzero(candidate)
     pad = max(margin, int(0.3 * max(np.ptp(ys), np.ptp(xs))))
@@ -651,15 +652,18 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
                        max_object_share=max_object_share, stereo_baseline=stereo_baseline)
     glass, opaque, footprint, on_table = ev.glass, ev.opaque, ev.footprint, ev.on_table
     pieces = find_candidates(glass, opaque, min_area=min_area // 4, close_radius=close_radius)
+    size = depth_m.size
     # an object stands on the table: most of a candidate lies over the table's footprint (a
-    # glass at the far edge may rise above it in the image, so not all of it)
-    pieces = [p for p in pieces if (p & footprint).sum() >= ON_TABLE_SHARE * p.sum()]
+    # glass at the far edge may rise above it in the image, so not all of it); GrabCut only
+    # adds to a candidate, so one already over MAX_IMAGE_SHARE is dropped before it (a frame's
+    # dropouts joined into one candidate cost GrabCut over a second)
+    pieces = [p for p in pieces if (p & footprint).sum() >= ON_TABLE_SHARE * p.sum() and
+              p.sum() <= MAX_IMAGE_SHARE * size]
     if grabcut_iterations > 0:
         pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
     departure = table_colour_departure(rgb, on_table)
     outline = outline_evidence(departure, on_table)
     kept = []
-    size = depth_m.size
     least = max(min_area, int(MIN_IMAGE_SHARE * size))
     pieces = [p for p in pieces if p.sum() <= MAX_IMAGE_SHARE * size]
     for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
