@@ -22,6 +22,7 @@ import numpy as np
 import trimesh
 from skimage.measure import marching_cubes
 
+from sr3d_cli.geometry.camera import mask_window, window_K
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import apply_T
 
@@ -32,12 +33,25 @@ OUTSIDE_SHARE = 0.6  # least share of a handle's pixels outside the body's conve
 ONE_SIDE = 0.9  # least share of a handle's pixels on one side of the body's centre line
 SLAB_STEP = 2  # pixels per cell of the grid the slab is built on
 HEIGHT_SLACK = 0.05  # share of the body's height a slab may reach beyond either end of it
+WINDOW_MARGIN = 2  # pixels of background kept around a mask while its handle is looked for
 
 
 def split_handle(mask: np.ndarray, K: np.ndarray, plane: Plane
                  ) -> tuple[np.ndarray, np.ndarray]:
     """``(body, handle)`` (H, W) bool, splitting ``mask (H, W) bool`` (see the module's
-    docstring); ``handle`` is empty when nothing in the outline is a handle."""
+    docstring); ``handle`` is empty when nothing in the outline is a handle. Worked out in a
+    window around the mask: a ring of background around it holds every pixel the opening and
+    the distances look at, so the result is the whole image's."""
+    body, handle = mask.astype(bool), np.zeros_like(mask, dtype=bool)
+    box = mask_window(mask, WINDOW_MARGIN)
+    if box is not None:
+        body[box], handle[box] = _split_in(mask[box], window_K(K, box[1].start, box[0].start),
+                                           plane)
+    return body, handle
+
+
+def _split_in(mask: np.ndarray, K: np.ndarray, plane: Plane) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`split_handle` of ``mask (h, w) bool`` in its window (``K`` the window's)."""
     none = np.zeros_like(mask, dtype=bool)
     m8 = mask.astype(np.uint8)
     inscribed = float(cv2.distanceTransform(np.pad(m8, 1), cv2.DIST_L2, 5).max())
