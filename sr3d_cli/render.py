@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sr3d_cli.geometry.camera import Camera
+from sr3d_cli.geometry.camera import Camera, mask_window
 
 log = logging.getLogger("sr3d")
 
@@ -214,10 +214,15 @@ def _fill_partial_normals(normals: np.ndarray, ids: np.ndarray, full: float = 0.
 
     At silhouettes a pixel's value blends the object with the background (a zero vector), so it
     is short and its direction unreliable (it varies between identical runs).
-    Such pixels take the normal of their best-covered 8-neighbour with the same id.
+    Such pixels take the normal of their best-covered 8-neighbour with the same id; only the
+    box of the drawn pixels, widened by one, is searched (no other pixel has such a neighbour).
     """
     length = np.linalg.norm(normals, axis=-1)
-    out = normals / np.maximum(length, 1e-6)[..., None]
+    full_out = normals / np.maximum(length, 1e-6)[..., None]
+    box = mask_window(ids > 0, 1)
+    if box is None:
+        return full_out
+    out, length, ids = full_out[box], length[box], ids[box]  # ``out`` is a view: filled in place
     h, w = ids.shape
     for _ in range(passes):
         short = (length < full) & (ids > 0)
@@ -243,7 +248,7 @@ def _fill_partial_normals(normals: np.ndarray, ids: np.ndarray, full: float = 0.
         fixed = short & (best_len >= full)
         out[fixed] = best[fixed]
         length = np.where(fixed, 1.0, length)
-    return out
+    return full_out
 
 
 class PyrenderRenderer(Renderer):
