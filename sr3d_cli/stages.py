@@ -165,12 +165,6 @@ def write_mesh(path, mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, str]:
     return stored, provenance.digest(data)
 
 
-def _with_opaque(frame: Frame, ids: np.ndarray, plane) -> np.ndarray:
-    """The instances with the opaque objects the raw depth sees added (:func:`opaque_objects`):
-    what may stand in front of an instance and hide its foot."""
-    return ids if plane is None else opaque_objects(ids, frame.depth_m, frame.camera.K, plane)
-
-
 class FrameState:
     """One frame's stage data, each piece read or computed once: the instances, the table, the
     objects' meshes, the poses. A stage that runs puts what it writes here (as its files hold
@@ -184,6 +178,7 @@ class FrameState:
         self.frame, self.plane_cfg, self.which_masks = frame, plane_cfg, which_masks
         self._instances: tuple[np.ndarray, dict[int, dict]] | None = None
         self._plane: tuple[Plane | None, str | None] | None = None
+        self._seen: np.ndarray | None = None
         self._made: dict[int, tuple[trimesh.Trimesh, dict, trimesh.Trimesh | None]] | None = None
         self._read: dict[int, trimesh.Trimesh] = {}
         self._poses: dict | None = None
@@ -206,7 +201,7 @@ class FrameState:
     def segmented(self, ids: np.ndarray, objects: list[dict]) -> None:
         """The instances segment made: ids ``(H, W) int32``, one record per id."""
         self._instances = (ids, instance_records(ids, objects))
-        self._plane = None  # fitted with the objects left out
+        self._plane = self._seen = None  # fitted with the objects left out; made from them
 
     def plane(self) -> tuple[Plane | None, str | None]:
         """The table with the instances left out (:func:`frame_plane`), or (None, why): fitted
@@ -216,6 +211,16 @@ class FrameState:
         if self._plane is None:
             self._plane = frame_plane(self.frame, self.instances()[0], self.plane_cfg)
         return self._plane
+
+    def seen(self) -> np.ndarray:
+        """The instance ids ``(H, W) int32`` with the opaque objects the raw depth sees added
+        (:func:`opaque_objects`; the ids alone without a table): what may stand in front of an
+        instance and hide its foot. Made once, for reconstruct and align."""
+        if self._seen is None:
+            ids, plane = self.instances()[0], self.plane()[0]
+            self._seen = ids if plane is None else opaque_objects(
+                ids, self.frame.depth_m, self.frame.camera.K, plane)
+        return self._seen
 
     def reconstructed(self, made: dict[int, tuple[trimesh.Trimesh, dict,
                                                   trimesh.Trimesh | None]]) -> None:
@@ -336,7 +341,7 @@ def reconstruct_frame(state: FrameState, reconstructor, record: dict | None = No
     ids, records = state.instances()
     plane, why = state.plane()
     problems, made, kept = [], {}, {}
-    seen = _with_opaque(frame, ids, plane)
+    seen = state.seen()
     for k in sorted(records):
         try:
             if plane is None and reconstructor.needs_plane:
@@ -393,7 +398,7 @@ def align_frame(state: FrameState, aligner, record: dict | None = None
     ids, records = state.instances()
     plane, why = state.plane()
     objects, problems = [], []
-    seen = _with_opaque(frame, ids, plane)
+    seen = state.seen()
     for k in sorted(records):
         if not state.has_mesh(k):
             problems.append(Problem("no mesh: run `sr3d reconstruct` first", k, upstream=True))
