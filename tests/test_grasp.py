@@ -302,6 +302,44 @@ def test_vessel_wider_than_the_gripper_is_pinched_at_the_rim():
     assert summary["top10_success"] >= 0.8
 
 
+def _scanned_glass(radius: float = 0.045, height: float = 0.12) -> trimesh.Trimesh:
+    """A glass as a scan gives it, standing on the table: its outer surface alone (side and
+    floor, one sheet), open at the mouth."""
+    solid = revolve(np.array([[0, 0], [radius, 0], [radius, height], [0, height]]), 96)
+    top = len(solid.vertices) - 1  # the top cap's centre
+    return _on_table(trimesh.Trimesh(solid.vertices,
+                                     solid.faces[~(solid.faces == top).any(axis=1)],
+                                     process=False))
+
+
+def test_a_glass_scanned_as_one_sheet_is_pinched_at_the_rim():
+    """9 cm across, 8 cm opening, no inner wall in the mesh: every sample lies on one sheet,
+    and its other side, 2.5 mm in, is what a pinch across the rim pairs it with (the
+    evaluator closes the jaws on the sheet itself). A closed vessel's samples get none, and
+    the sheet's samples alone give no antipodal pair within the opening."""
+    glass = _scanned_glass()
+    assert not glass.is_watertight
+    cloud = mesh_cloud(glass, np.eye(4), 1.0, 1, 3000)
+    assert len(cloud.points) == 6000
+    inner = cloud.points[3000:]
+    assert np.allclose(np.linalg.norm(cloud.points[:3000] - inner, axis=1), 0.0025)
+    assert np.all(np.einsum("ij,ij->i", cloud.normals[:3000], cloud.normals[3000:]) < -0.999)
+    assert len(mesh_cloud(_beaker(), np.eye(4), 1.0, 1, 3000).points) == 3000
+
+    scene = Cloud.concat([_table_cloud(), cloud])
+    grasps, messages = Planner(Config().grasp).plan(scene, {1: cloud}, PLANE)
+    assert not messages and len(grasps) >= 3
+    assert np.all(grasps.widths < 0.02)
+    summary = summarise(grasps, judge(grasps, _truth([glass]), GRIPPER), [1], friction=0.5)
+    assert summary["top1"] == {"1": True}
+    assert summary["top10_success"] >= 0.8
+
+    one_side = cloud.select(np.arange(len(cloud.points)) < 3000)
+    grasps, messages = Planner(Config().grasp).plan(
+        Cloud.concat([_table_cloud(), one_side]), {1: one_side}, PLANE)
+    assert len(grasps) == 0 and "no antipodal pair" in messages[0]
+
+
 def test_a_wall_with_no_partner_across_the_vessel_closes_along_its_normal():
     """A 9 cm beaker's wall (2.5 mm) has no far partner within the 8 cm opening, so its one pair
     is the near one, a few millimetres long and up to ``pair_radius`` off the normal: its own

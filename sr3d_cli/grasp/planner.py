@@ -28,8 +28,9 @@ look on the later rungs (:meth:`Planner.brief`). It keeps the grasps whose best 
 least friction on the model, and a message says when even those need more than ``friction``.
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
-mesh's normals, so the antipode behind the object is known; otherwise the cloud holds only what
-the depth sees. A placed model can be wrong (a handle or a spout it lacks, a flat bottle fitted
+mesh's normals, so the antipode behind the object is known (a wall an open mesh models by
+one sheet gets its other side, :func:`mesh_cloud`); otherwise the cloud holds only what the
+depth sees. A placed model can be wrong (a handle or a spout it lacks, a flat bottle fitted
 round, a fit too thin or shifted); the sensor's own readings on the objects, which the repaired
 depth replaces with the models, still show where surfaces are: a grasp whose fingers hold
 readings no model accounts for is contradicted by the observation and dropped
@@ -44,6 +45,7 @@ import numpy as np
 
 from sr3d_cli.geometry.camera import depth_normals, depth_to_points, project, unproject
 from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.raycast import first_hits
 from sr3d_cli.geometry.transforms import place_points, rotation_about
 from sr3d_cli.geometry.transforms import unit as _unit
 from sr3d_cli.grasp import GraspSet
@@ -125,14 +127,48 @@ def unexplained(observed: Cloud, models: list["Sections"]) -> Cloud:
 
 def mesh_cloud(mesh, T_cam_obj: np.ndarray, scale: float, label: int, count: int,
                seed: int = 0) -> Cloud:
-    """Points spread evenly over a placed mesh's surface, with its outward face normals."""
+    """Points spread evenly over a placed mesh's surface, with its outward face normals.
+
+    A mesh that is not closed may model a wall by one sheet (a scanned glass: its outer surface
+    alone, open at the mouth), and a sheet has no antipode across the wall to pair a sample
+    with: a glass wider than the opening, which only a pinch across its rim can hold, would get
+    no grasp. Where nothing of such a mesh lies within :data:`SHEET_REACH` behind a sample
+    (:func:`on_sheet`), the sheet's other side is added, :data:`SHEET_WALL` behind it with the
+    opposite normal (so ``count`` and more points come back)."""
     import trimesh
 
     placed = trimesh.Trimesh(place_points(mesh.vertices, T_cam_obj, scale), mesh.faces,
                              process=False)
     pts, faces = trimesh.sample.sample_surface(placed, count, seed=seed)
-    nrm = placed.face_normals[faces]
-    return Cloud(np.asarray(pts), np.asarray(nrm), np.full(len(pts), label, dtype=np.int64))
+    pts, nrm = np.asarray(pts), np.asarray(placed.face_normals[faces])
+    if not placed.is_watertight:
+        sheet = on_sheet(pts, nrm, np.asarray(placed.triangles))
+        pts = np.vstack([pts, pts[sheet] - SHEET_WALL * nrm[sheet]])
+        nrm = np.vstack([nrm, -nrm[sheet]])
+    return Cloud(pts, nrm, np.full(len(pts), label, dtype=np.int64))
+
+
+def on_sheet(points: np.ndarray, normals: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """``(n,) bool``: the surface samples ``points (n, 3)`` (outward unit ``normals (n, 3)``)
+    behind which no triangle of ``triangles (m, 3, 3)`` lies within :data:`SHEET_REACH`
+    along the inward normal: a wall its mesh models by one sheet. The samples go in groups,
+    one per cube of twice that reach, each against the triangles near its cube (a scan's tens
+    of thousands of triangles against every sample at once would take gigabytes)."""
+    out = np.zeros(len(points), bool)
+    if not len(points) or not len(triangles):
+        return out
+    _, group = np.unique(np.floor(points / (2 * SHEET_REACH)).astype(np.int64), axis=0,
+                         return_inverse=True)
+    group = group.ravel()
+    lo_tri, hi_tri = triangles.min(axis=1), triangles.max(axis=1)
+    for idx in np.split(np.argsort(group, kind="stable"), np.cumsum(np.bincount(group))[:-1]):
+        lo = points[idx].min(axis=0) - SHEET_REACH
+        hi = points[idx].max(axis=0) + SHEET_REACH
+        near = np.all((hi_tri >= lo) & (lo_tri <= hi), axis=1)
+        dist, _ = first_hits(points[idx] - SHEET_START * normals[idx], -normals[idx],
+                             triangles[near], max_distance=SHEET_REACH, chunk=1024)
+        out[idx] = ~np.isfinite(dist)
+    return out
 
 
 def in_view(cloud: Cloud, K: np.ndarray, shape: tuple[int, int]) -> Cloud:
@@ -178,6 +214,9 @@ EXACT_POOL = 3   # times top_k grasps the rescoring may reach into (Planner._obj
 THIN_PAIR = 3.0  # a pair shorter than this many pair radii spans a thin wall (Planner._frames)
 LATE_REDRAWS = 1  # redraws of a later rung for an object with failing grasps (Planner.brief)
 SURE = 1e-5  # m, kept from a box's faces where a test on other coordinates must agree
+SHEET_WALL = 0.0025  # m: the wall one sheet of an open mesh stands for (glass: 1-4 mm)
+SHEET_REACH = 0.01  # m: nothing of its mesh this near behind a sample: it lies on one sheet
+SHEET_START = 1e-5  # m behind a sample its ray starts, so that its own triangle is not met
 CHUNK = 96  # frames tried at once (Planner._try_frames): 48 is ~7% slower, 192 no faster
 MIN_SECTION = 3  # target points under the pads that make a section (fewer: a stray sample)
 MAX_CONTACT_ANGLE = np.radians(89.9)  # a contact's angle is capped here: tan stays finite
