@@ -11,13 +11,14 @@ import generalise
 from common import OTHER_CONTACTS
 
 
-def _breakdown_report(breakdown: dict) -> list[str]:
+def _breakdown_report(breakdown: dict, title: str, frames: str) -> list[str]:
+    """The section of a breakdown (``bench/run.py breakdown`` or ``extbreakdown``) titled
+    ``title``, its ``frames`` said in words."""
     if not breakdown:
         return []
     draws = len(next(iter(breakdown["conditions"].values()))["grasp"]["top1_by_draw"])
-    lines = [f"## where grasps are lost (study seed {breakdown['seed']}, `bench/run.py "
-             "breakdown`)", "",
-             f"{breakdown['frames']} generated frames; the same planner on the true meshes at "
+    lines = [f"## {title}", "",
+             f"{breakdown['frames']} {frames}; the same planner on the true meshes at "
              "their true poses with the true depth, on sr3d's reconstruction and placement "
              "from the true masks, and on the whole pipeline; judged as above, mean of "
              f"{draws} draws. Depth over the true object masks.", "",
@@ -40,8 +41,8 @@ def _breakdown_report(breakdown: dict) -> list[str]:
                   f"| the rest ({m['rest_objects']}) | " + " | ".join(
                       f"{c['merged']['rest_top1_success']:.3f}" for c in conditions.values())
                   + " |"]
-    if all("apart" in c for c in conditions.values()):
-        apart = next(iter(conditions.values()))["apart"]
+    apart = next(iter(conditions.values())).get("apart", {})
+    if all("apart" in c for c in conditions.values()) and apart["grid"]["rim only"]["objects"]:
         first = apart["grid"]
         lines += ["", "Top-1 of the objects only a pinch across the rim can hold (`rim_only`) and "
                   "of the others, by each contact model:", "",
@@ -173,7 +174,13 @@ def write_report(results: dict, methods, out: Path) -> None:
                       f"ones also longer; `rim_only`): {rim['top1_success']:.3f}; of the other "
                       f"{rest['objects']}: {rest['top1_success']:.3f}"]
         lines += [""]
-    lines += _breakdown_report(results.get("breakdown", {}))
+    breakdown = results.get("breakdown", {})
+    lines += _breakdown_report(breakdown, f"where grasps are lost (study seed "
+                               f"{breakdown.get('seed')}, `bench/run.py breakdown`)",
+                               "generated frames")
+    lines += _breakdown_report(results.get("extbreakdown", {}), "where grasps are lost on the "
+                               "independent renderer (`bench/run.py extbreakdown`)",
+                               "frames of ../shared/extsim (scanned meshes, some open surfaces)")
     mesh = results.get("mesh", {})
     if mesh:
         lines += ["## segmentation and reconstruction (default backends)", "",

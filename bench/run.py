@@ -317,22 +317,34 @@ def _write_truth(frame, cfg: Config, geometry: bool) -> np.ndarray | None:
 
 
 def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict:
-    """Where the grasp target is lost, on the study set of seed :data:`BREAKDOWN_SEED`: the
-    same planner on the true meshes at their true poses with the true depth (the planner
-    alone), on sr3d's reconstruction and placement from the true masks (segmentation left
-    out), and on the whole pipeline; judged as in :func:`grasp_bench`, over
-    :data:`BREAKDOWN_DRAWS` draws; under each condition also the top-1 of the objects sr3d's
-    segmenter merged with another (:func:`_merged_objects`) and of the rest, and every
-    object's outcomes (:func:`_object_rows`, in ``results.json``). Not part of a plain
-    ``make bench``: ``bench/run.py breakdown``."""
+    """Where the grasp target is lost, on the study set of seed :data:`BREAKDOWN_SEED`
+    (:func:`_breakdown`). Not part of a plain ``make bench``: ``bench/run.py breakdown``."""
     folder = work / f"study{BREAKDOWN_SEED}"
     generated_set(folder, frames, SynthConfig(seed=BREAKDOWN_SEED, views=1), renderer)
+    return {"seed": BREAKDOWN_SEED, **_breakdown(folder, work / f"study{BREAKDOWN_SEED}", cfg)}
+
+
+def extsim_breakdown(work: Path, cfg: Config) -> dict:
+    """Where the grasp target is lost on ``../shared/extsim`` (:func:`_breakdown`): shapes sr3d
+    never drew, scanned meshes. Not part of a plain ``make bench``: ``bench/run.py
+    extbreakdown``."""
+    return _breakdown(SHARED / "extsim", work / "extsim_breakdown", cfg)
+
+
+def _breakdown(folder: Path, prefix: Path, cfg: Config) -> dict:
+    """The same planner on the true meshes at their true poses with the true depth (the
+    planner alone), on sr3d's reconstruction and placement from the true masks (segmentation
+    left out), and on the whole pipeline, for every scene of ``folder`` (frame 000000; stage
+    outputs under ``prefix``_<condition>); judged as in :func:`grasp_bench`, over
+    :data:`BREAKDOWN_DRAWS` draws; under each condition also the top-1 of the objects sr3d's
+    segmenter merged with another (:func:`_merged_objects`) and of the rest, and every
+    object's outcomes (:func:`_object_rows`, in ``results.json``)."""
     planners, pipeline = _planners(cfg)[:BREAKDOWN_DRAWS], Pipeline(cfg)
     conditions, top1, merged = {}, {}, {}
     rims = {source.name: rim_only(source, "000000", cfg)
             for source in discover_scenes(folder, IOConfig(), None)}
     for condition in CONDITIONS:
-        out = work / f"study{BREAKDOWN_SEED}_{condition.replace(' ', '_')}"
+        out = Path(f"{prefix}_{condition.replace(' ', '_')}")
         shutil.rmtree(out, ignore_errors=True)
         by_draw: list[list[dict]] = [[] for _ in planners]
         rows, names = [], []
@@ -363,8 +375,7 @@ def breakdown_bench(work: Path, cfg: Config, renderer, frames: int = 24) -> dict
     objects = _object_rows(folder, top1, merged)
     for condition in conditions:
         conditions[condition]["merged"] = _held_by_merge(objects, condition)
-    return {"seed": BREAKDOWN_SEED, "frames": frames, "conditions": conditions,
-            "objects": objects}
+    return {"frames": len(names), "conditions": conditions, "objects": objects}
 
 
 def _object_rows(folder: Path, top1: dict[str, list[list[tuple[str, dict]]]],
@@ -634,6 +645,8 @@ SECTIONS: dict[str, Section] = {
     "breakdown": Section(lambda b: {"breakdown": breakdown_bench(b.work, b.default,
                                                                  b.renderer)},
                          f"where grasps are lost, study seed {BREAKDOWN_SEED}", optional=True),
+    "extbreakdown": Section(lambda b: {"extbreakdown": extsim_breakdown(b.work, b.default)},
+                            "where grasps are lost on ../shared/extsim", optional=True),
 }
 DEFAULT_SECTIONS = tuple(name for name, s in SECTIONS.items() if not s.optional)
 
