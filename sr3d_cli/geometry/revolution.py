@@ -8,6 +8,8 @@ size is the pose's ``scale`` (= height in metres): ``p_cam = R @ (scale * p_obj)
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 import trimesh
@@ -102,6 +104,17 @@ def resting_edge(z: np.ndarray, r: np.ndarray, z_mass: float) -> tuple[np.ndarra
     return best
 
 
+@functools.lru_cache(maxsize=8)
+def _ring_angles(n_theta: int) -> tuple[np.ndarray, np.ndarray]:
+    """(cos, sin) ``(n_theta, 1)`` each of ``n_theta`` angles evenly round a circle from 0;
+    read-only, shared by every silhouette drawn with that many."""
+    theta = np.linspace(0, 2 * np.pi, n_theta, endpoint=False)
+    out = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
 def silhouette(centres: np.ndarray, axis: np.ndarray, radii: np.ndarray, K: np.ndarray,
                shape: tuple[int, int], origin: tuple[int, int] = (0, 0), n_theta: int = 32
                ) -> np.ndarray:
@@ -124,8 +137,8 @@ def silhouette(centres: np.ndarray, axis: np.ndarray, radii: np.ndarray, K: np.n
     u = cross3(axis, helper)
     u /= np.linalg.norm(u)
     v = cross3(axis, u)
-    theta = np.linspace(0, 2 * np.pi, n_theta, endpoint=False)
-    ring = np.cos(theta)[:, None] * u + np.sin(theta)[:, None] * v  # (T, 3)
+    cos, sin = _ring_angles(n_theta)
+    ring = cos * u + sin * v  # (T, 3)
     pts = centres[:, None, :] + radii[:, None, None] * ring[None]  # (L, T, 3)
     z = pts[..., 2]
     uv = np.stack([pts[..., 0] / np.maximum(z, 1e-6) * K[0, 0] + K[0, 2] - origin[0],

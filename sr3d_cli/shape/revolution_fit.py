@@ -163,13 +163,21 @@ def _pixels(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _extent(mask: np.ndarray, top_share: float = 0.0) -> tuple[float, float, float]:
     """(top row, bottom row, mean column) of a rotated mask; with ``top_share``, the top row
     is the first one at least that share of the widest row wide."""
-    widths = mask.sum(1)
+    widths = _counts(mask, 1)
     rows = np.nonzero(widths)[0]
     top = rows[0] if top_share <= 0 else np.nonzero(widths >= top_share * widths.max())[0][0]
     # the mean column from the columns' counts: integer sums, so exactly the mean of the
     # pixels' columns
-    column_sum = int(mask.sum(0) @ np.arange(mask.shape[1]))
+    column_sum = int(_counts(mask, 0) @ np.arange(mask.shape[1]))
     return float(top), float(rows[-1]), float(column_sum) / int(widths.sum())
+
+
+def _counts(mask: np.ndarray, axis: int) -> np.ndarray:
+    """``mask.sum(axis)`` of a 2-D bool mask as int64: the set pixels of each column (axis 0)
+    or row (axis 1), counted by cv2 over the uint8 view (a fifth of NumPy's time on a bool
+    array)."""
+    return cv2.reduce(mask.view(np.uint8), axis, cv2.REDUCE_SUM, dtype=cv2.CV_32S
+                      ).ravel().astype(np.int64)
 
 
 def _metres(gap_px: float, moved_px: float, eps: float) -> float:
@@ -191,7 +199,7 @@ def _orientation(mask: np.ndarray) -> float:
 def _widths(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """Width (pixels) of the mask on each of ``rows`` (clipped, rounded)."""
     r = np.clip(np.rint(rows).astype(int), 0, mask.shape[0] - 1)
-    return mask[r].sum(1).astype(np.float64)
+    return _counts(mask, 1)[r].astype(np.float64)
 
 
 def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: str,
@@ -221,22 +229,18 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         t_obs, b_obs, x_obs = _extent(obs, share)
         t_ren, b_ren, x_ren = _extent(ren, share)
         eps = 0.005
-        # pixels moved in the window per metre of each parameter (finite differences)
-        def shift(delta_base=np.zeros(3), delta_top=np.zeros(3)):
-            a = frame.point(project((model.base + delta_base)[None], K))[0]
-            b = frame.point(project((model.base + model.height * model.axis + delta_top)[None],
-                                    K))[0]
-            return a, b
-        a0, b0 = shift()
+        # pixels moved in the window per metre of each parameter (finite differences): the
+        # base and the top, then the top moved along the axis and the base moved two ways
+        top = model.base + model.height * model.axis
         if resting == "standing":
             away = unit(plane.project_direction(model.base))
             side = cross3(n, away)
+            a0, b0, bt, a_away, a_side = frame.point(project(np.stack([
+                model.base, top, top + eps * model.axis, model.base + eps * away,
+                model.base + eps * side]), K))
             # top: the height; bottom: the base moves towards / away from the camera
-            _, bt = shift(delta_top=eps * model.axis)
             dh = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
-            a_away, _ = shift(delta_base=eps * away)
             db = _metres(b_obs - b_ren, a_away[1] - a0[1], eps)
-            a_side, _ = shift(delta_base=eps * side)
             ds = _metres(x_obs - x_ren, a_side[0] - a0[0], eps)
             step = np.clip(0.8 * np.array([dh, db, ds]), -0.5 * model.height, 0.5 * model.height)
             model.base = model.base + step[1] * away + step[2] * side
@@ -244,11 +248,11 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         else:
             # lying: move each end along the axis, the axis sideways in the plane
             side = unit(cross3(n, model.axis))
-            _, bt = shift(delta_top=eps * model.axis)
+            a0, b0, bt, a_b, a_side = frame.point(project(np.stack([
+                model.base, top, top + eps * model.axis, model.base - eps * model.axis,
+                model.base + eps * side]), K))
             dt = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
-            a_b, _ = shift(delta_base=-eps * model.axis)
             db = _metres(b_obs - b_ren, a_b[1] - a0[1], eps)
-            a_side, _ = shift(delta_base=eps * side)
             ds = _metres(x_obs - x_ren, a_side[0] - a0[0], eps)
             step = np.clip(0.8 * np.array([dt, db, ds]), -0.5 * model.height, 0.5 * model.height)
             model.base = model.base - step[1] * model.axis + step[2] * side
