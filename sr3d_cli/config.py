@@ -154,6 +154,7 @@ class GraspConfig:
     depths: list[float] = field(default_factory=lambda: [0.005, 0.01, 0.02, 0.03, 0.04])
     friction: float = 0.5
     width_margin: float = 0.004
+    open_wide: bool = True
     clearance: float = 0.003
     seeds: int = 80
     seed_bins: int = 12

@@ -26,6 +26,9 @@ an object given a fallback (a lying vessel's model opened at its wider end,
 (:meth:`Planner.relaxed`); an object that already has grasps, failing ones, gets a brief
 look on the later rungs (:meth:`Planner.brief`). It keeps the grasps whose best needs the
 least friction on the model, and a message says when even those need more than ``friction``.
+Last, each grasp opens as wide as the gripper and the scene let it (``open_wide``,
+:meth:`Planner._opened`): the jaws then close from farther out, so a model a few millimetres
+narrower than its object, or off to one side, still leaves the fingers clear of it.
 
 Objects that were placed (aligned meshes) contribute points sampled all over the mesh with the
 mesh's normals, so the antipode behind the object is known (a wall an open mesh models by
@@ -219,6 +222,7 @@ SHEET_REACH = 0.01  # m: nothing of its mesh this near behind a sample: it lies 
 SHEET_START = 1e-5  # m behind a sample its ray starts, so that its own triangle is not met
 CHUNK = 96  # frames tried at once (Planner._try_frames): 48 is ~7% slower, 192 no faster
 MIN_SECTION = 3  # target points under the pads that make a section (fewer: a stray sample)
+OPENINGS = (1.0, 0.5, 0.25)  # shares of the spare opening tried in turn (Planner._opened)
 MAX_CONTACT_ANGLE = np.radians(89.9)  # a contact's angle is capped here: tan stays finite
 EXPLAINED = 0.003  # m, a reading this near a placed model's outline may be its surface
 RAY_NOISE = 0.004  # m, a reading made a median (observed_cloud) errs up to this along its ray
@@ -466,7 +470,46 @@ class Planner:
         if len(grasps) == 0:
             return grasps, (f"no collision-free grasp inside the friction cone within the "
                             f"{g.max_width:.3f} m opening"), np.inf
-        return grasps.take(slice(0, cfg.top_k)), "", (0.0 if surface is None else mu)
+        grasps = grasps.take(slice(0, cfg.top_k))
+        if cfg.open_wide:
+            grasps = self._opened(grasps, scene, observed, plane)
+        return grasps, "", (0.0 if surface is None else mu)
+
+    def _opened(self, grasps: GraspSet, scene: Cloud, observed: Cloud | None,
+                plane: Plane) -> GraspSet:
+        """The grasps with each opening widened to the widest of :data:`OPENINGS` (shares of
+        what the gripper has to spare beyond it) whose fingers' path, from there in to the
+        opening planned, holds fewer than ``collision_points`` of the ``scene`` points (the
+        object's own included) and of the ``observed`` readings no model accounts for, both
+        with the fingers inflated by ``collision_margin`` as in :meth:`_collision_free`, and
+        keeps the gripper ``clearance`` above the table; the opening planned where none does.
+        The grasp's contacts, centre and score stay: closed from farther out, the jaws meet
+        the object where they would have from the planned opening, and the fingers start
+        clear of an object a few millimetres wider than its model (measured on
+        ../shared/extsim from sr3d's models of the true masks: most failed grasps are fingers
+        set down on the object they hold)."""
+        g, cfg = self.gripper, self.cfg
+        widths = grasps.widths.copy()
+        clouds = [c.points for c in (scene, observed) if c is not None and len(c.points)]
+        for i in range(len(grasps)):
+            R, t, w, d = grasps.R[i], grasps.t[i], float(grasps.widths[i]), \
+                float(grasps.depths[i])
+            spare = g.max_width - w
+            if spare <= 1e-6:
+                continue
+            local = [to_local(R[None], t[None], pts) for pts in clouds]
+            for share in OPENINGS:
+                wide = w + share * spare
+                if g.lowest(R, t, wide, d, plane) < cfg.clearance:
+                    continue
+                boxes = g.boxes(wide, d)[None, :2].copy()  # (1, 2, 2, 3): the two fingers
+                boxes[0, 0, 1, 1] = -w / 2  # each finger's path: from the wide opening in
+                boxes[0, 1, 0, 1] = w / 2
+                if all(count_inside(pts, boxes, shrink=-cfg.collision_margin).max()
+                       < cfg.collision_points for pts in local):
+                    widths[i] = wide
+                    break
+        return replace(grasps, widths=widths)
 
     def score(self, mu: np.ndarray, width: np.ndarray, R: np.ndarray, centre: np.ndarray,
               plane: Plane, top: float, depth: float | np.ndarray,
