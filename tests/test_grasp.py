@@ -335,8 +335,10 @@ def test_vessel_wider_than_the_gripper_is_pinched_at_the_rim():
         assert abs(planned.R[i][:2, 1] @ radial) > 0.9, "closes across the wall"
         # near the rim (camera z grows downwards): the fingers reach past the wall's top
         assert planned.t[i][2] < rim_z + GRIPPER.finger_length
-    # opened wide, the inner finger starts inside the vessel, short of its far wall
+    # opened wide, the inner finger starts inside the vessel, short of its far wall (the
+    # 80 mm opening puts its pad 9 mm from the axis of a 96 mm bore)
     grasps, _ = _plan(beaker)
+    assert np.allclose(grasps.t, planned.t) and np.allclose(grasps.widths, GRIPPER.max_width)
     records = judge(grasps, _truth([beaker]), GRIPPER)
     summary = summarise(grasps, records, [1], friction=0.5)
     assert summary["top1"] == {"1": True}
