@@ -489,26 +489,24 @@ class Planner:
         ../shared/extsim from sr3d's models of the true masks: most failed grasps are fingers
         set down on the object they hold)."""
         g, cfg = self.gripper, self.cfg
-        widths = grasps.widths.copy()
-        clouds = [c.points for c in (scene, observed) if c is not None and len(c.points)]
-        for i in range(len(grasps)):
-            R, t, w, d = grasps.R[i], grasps.t[i], float(grasps.widths[i]), \
-                float(grasps.depths[i])
-            spare = g.max_width - w
-            if spare <= 1e-6:
-                continue
-            local = [to_local(R[None], t[None], pts) for pts in clouds]
-            for share in OPENINGS:
-                wide = w + share * spare
-                if g.lowest(R, t, wide, d, plane) < cfg.clearance:
-                    continue
-                boxes = g.boxes(wide, d)[None, :2].copy()  # (1, 2, 2, 3): the two fingers
-                boxes[0, 0, 1, 1] = -w / 2  # each finger's path: from the wide opening in
-                boxes[0, 1, 0, 1] = w / 2
-                if all(count_inside(pts, boxes, shrink=-cfg.collision_margin).max()
-                       < cfg.collision_points for pts in local):
-                    widths[i] = wide
-                    break
+        w, d = grasps.widths, grasps.depths
+        widths = w.copy()
+        todo = g.max_width - w > 1e-6
+        local = [to_local(grasps.R, grasps.t, c.points)  # (F, 3, n): every grasp's frame
+                 for c in (scene, observed) if c is not None and len(c.points)]
+        for share in OPENINGS:
+            if not todo.any():
+                break
+            wide = w + share * (g.max_width - w)
+            boxes = g.boxes(wide, d)[:, :2].copy()  # (F, 2, 2, 3): the two fingers
+            boxes[:, 0, 1, 1] = -w / 2  # each finger's path: from the wide opening in
+            boxes[:, 1, 0, 1] = w / 2
+            ok = todo & (g.lowest(grasps.R, grasps.t, wide, d, plane) >= cfg.clearance)
+            for pts in local:
+                ok &= count_inside(pts, boxes, shrink=-cfg.collision_margin).max(axis=1) \
+                    < cfg.collision_points
+            widths[ok] = wide[ok]
+            todo &= ~ok
         return replace(grasps, widths=widths)
 
     def score(self, mu: np.ndarray, width: np.ndarray, R: np.ndarray, centre: np.ndarray,
