@@ -561,7 +561,7 @@ class Bench:
 
     @classmethod
     def prepare(cls, work: Path) -> "Bench":
-        synth = work / f"synth{SYNTH_SEED}"
+        synth = ROOT / "work" / f"synth{SYNTH_SEED}"  # read only: shared by every work folder
         renderer = make_renderer("auto")
         generated_set(synth, SYNTH_FRAMES, SynthConfig(seed=SYNTH_SEED, views=1), renderer)
         paper = Config()
@@ -651,10 +651,11 @@ SECTIONS: dict[str, Section] = {
 DEFAULT_SECTIONS = tuple(name for name, s in SECTIONS.items() if not s.optional)
 
 
-def run(sections: tuple[str, ...], out: Path) -> dict:
+def run(sections: tuple[str, ...], out: Path, work: Path = ROOT / "work") -> dict:
     """Run ``sections`` (in :data:`SECTIONS` order) into ``out``/results.json, keeping the other
-    sections' results found there; write ``out``/RESULTS.md and ``out``/mae.png."""
-    bench = Bench.prepare(ROOT / "work")
+    sections' results found there; write ``out``/RESULTS.md and ``out``/mae.png. The sections'
+    stage outputs go below ``work`` (emptied section by section)."""
+    bench = Bench.prepare(work)
     previous = out / "results.json"
     results = json.loads(previous.read_text()) if previous.is_file() else {}
     for key in ("synthetic", "real", "timings", *SECTIONS):  # the depth section's three
@@ -673,8 +674,11 @@ def run(sections: tuple[str, ...], out: Path) -> dict:
 @click.argument("sections", nargs=-1, type=click.Choice(list(SECTIONS)), metavar="[SECTION]...")
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=ROOT,
               show_default="bench/", help="Folder of results.json, RESULTS.md and mae.png.")
+@click.option("--work", type=click.Path(file_okay=False, path_type=Path),
+              default=ROOT / "work", show_default="bench/work/",
+              help="Folder of the sections' stage outputs: two runs at once need two.")
 @click.option("--list", "show", is_flag=True, help="List the sections and exit.")
-def main(sections: tuple[str, ...], out: Path, show: bool) -> None:
+def main(sections: tuple[str, ...], out: Path, work: Path, show: bool) -> None:
     """Measure sr3d: run SECTIONS (default: all but the optional ones) and rewrite the
     report; the results of sections not run are kept from OUT/results.json.
 
@@ -687,7 +691,7 @@ def main(sections: tuple[str, ...], out: Path, show: bool) -> None:
             click.echo(f"{name:10s} {section.about}"
                        + ("  [only when named]" if section.optional else ""))
         return
-    run(sections or DEFAULT_SECTIONS, out)
+    run(sections or DEFAULT_SECTIONS, out, work)
 
 
 if __name__ == "__main__":
