@@ -65,6 +65,7 @@ def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
         from sr3d_cli.grasp.planner import Planner
 
         planner = Planner(cfg.grasp)
+    Pipeline(cfg).renderer  # its libraries load once per process, as in a batch: not a frame's
     for source in discover_scenes(root, IOConfig(), None):
         scene = staged(source, work / source.name)
         for fid in scene.frame_ids():
