@@ -546,6 +546,7 @@ def mesh_bench(synth: Path) -> dict:
 
 METHODS = ("raw", "plane-fill", "inpaint", "paper", "sr3d")  # depth section, in table order
 SYNTH_SEED, SYNTH_FRAMES = 700, 24  # the set sr3d's parameters were tuned on (no test uses it)
+WORK = ROOT / "work"  # the sections' stage outputs unless --work names another folder
 
 
 @dataclass
@@ -561,7 +562,7 @@ class Bench:
 
     @classmethod
     def prepare(cls, work: Path) -> "Bench":
-        synth = ROOT / "work" / f"synth{SYNTH_SEED}"  # read only: shared by every work folder
+        synth = WORK / f"synth{SYNTH_SEED}"  # read only: shared by every work folder
         renderer = make_renderer("auto")
         generated_set(synth, SYNTH_FRAMES, SynthConfig(seed=SYNTH_SEED, views=1), renderer)
         paper = Config()
@@ -651,7 +652,7 @@ SECTIONS: dict[str, Section] = {
 DEFAULT_SECTIONS = tuple(name for name, s in SECTIONS.items() if not s.optional)
 
 
-def run(sections: tuple[str, ...], out: Path, work: Path = ROOT / "work") -> dict:
+def run(sections: tuple[str, ...], out: Path, work: Path = WORK) -> dict:
     """Run ``sections`` (in :data:`SECTIONS` order) into ``out``/results.json, keeping the other
     sections' results found there; write ``out``/RESULTS.md and ``out``/mae.png. The sections'
     stage outputs go below ``work`` (emptied section by section)."""
@@ -675,7 +676,7 @@ def run(sections: tuple[str, ...], out: Path, work: Path = ROOT / "work") -> dic
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=ROOT,
               show_default="bench/", help="Folder of results.json, RESULTS.md and mae.png.")
 @click.option("--work", type=click.Path(file_okay=False, path_type=Path),
-              default=ROOT / "work", show_default="bench/work/",
+              default=WORK, show_default="bench/work/",
               help="Folder of the sections' stage outputs: two runs at once need two.")
 @click.option("--list", "show", is_flag=True, help="List the sections and exit.")
 def main(sections: tuple[str, ...], out: Path, work: Path, show: bool) -> None:
