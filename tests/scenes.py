@@ -31,15 +31,24 @@ def table_point(plane: Plane, x: float, y: float) -> np.ndarray:
 
 def solids_on_table(placements):
     """Instance ids, K, the table and depth (metres, 0 off the objects) of solids of revolution
-    standing on :func:`table`. placements: (profile, height m, x m, y m on the table)."""
+    on :func:`table`. placements: (profile, height m, x m, y m on the table), standing, or with
+    a fifth item, lying with the axis turned that many degrees from the image's x direction
+    (the base at x, y; the axis raised by the widest radius)."""
     plane = table()
     up = plane.normal
     x_dir = np.array([1.0, 0, 0])
-    R = np.stack([x_dir, np.cross(up, x_dir), up], 1)
+    y_dir = np.cross(up, x_dir)
     meshes = []
-    for k, (profile, height, x, y) in enumerate(placements, start=1):
+    for k, (profile, height, x, y, *lying) in enumerate(placements, start=1):
         m = revolve(np.asarray(profile) / height)
         base = table_point(plane, x, y)
+        if lying:
+            yaw = np.radians(lying[0])
+            axis = np.cos(yaw) * x_dir + np.sin(yaw) * y_dir
+            R = np.stack([up, np.cross(axis, up), axis], 1)
+            base = base + float(np.max(np.asarray(profile)[:, 0])) * up
+        else:
+            R = np.stack([x_dir, y_dir, up], 1)
         meshes.append(RenderMesh(m.vertices @ (height * R).T + base, np.asarray(m.faces), k))
     out = make_renderer("numpy").render(meshes, Camera(K_TABLE, 640, 480))
     return out.ids, K_TABLE, plane, out.depth.astype(np.float64)
