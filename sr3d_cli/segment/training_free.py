@@ -738,7 +738,9 @@ def rejoined(found: list[Candidate], K: np.ndarray, plane: Plane, depth_m: np.nd
             if fu.iou < (fa.iou * na + fb.iou * nb) / (na + nb):
                 continue
             r = _RegionReadings.of(union, depth_m, K, plane)
-            if r is not None and _apart_by_readings(r, fu, union, ((fa, a & ~b), (fb, b & ~a))):
+            only_a, only_b = a & ~b, b & ~a  # grown candidates may overlap
+            if r is not None and _apart_by_readings(r, fu, only_a | only_b,
+                                                    ((fa, only_a), (fb, only_b))):
                 continue
             out[i] = Candidate(union, float(glass[union].mean()))
             del out[j]
@@ -749,13 +751,13 @@ def rejoined(found: list[Candidate], K: np.ndarray, plane: Plane, depth_m: np.nd
 
 
 def _apart_by_readings(r: _RegionReadings, whole, union: np.ndarray, parts) -> bool:
-    """Whether the readings ``r`` of ``union`` (H, W) bool keep its ``parts`` ((fit, mask)
-    pairs, masks not overlapping) apart from one fit ``whole`` of it: more of them lie on the
-    parts' surfaces by the margin a split by the readings needs, or a part's fit holds
-    :data:`OUTLINE_REFUTED` more of its own readings than the whole's fit does (a lying
-    glass behind a standing one, generated seed 5100 frame 18: their union drawn at 0.86
-    against 0.81 / 0.89, but the lying glass's fit holds 18% of its readings, the union's
-    none)."""
+    """Whether the readings ``r`` in ``union`` (H, W) bool keep its ``parts`` ((fit, mask)
+    pairs, masks not overlapping, together ``union``) apart from one fit ``whole`` of them:
+    more of them lie on the parts' surfaces by the margin a split by the readings needs, or a
+    part's fit holds :data:`OUTLINE_REFUTED` more of its own readings than the whole's fit
+    does (a lying glass behind a standing one, generated seed 5100 frame 18: their union
+    drawn at 0.86 against 0.81 / 0.89, but the lying glass's fit holds 18% of its readings,
+    the union's none)."""
     on = r.on_surface(whole, union)
     if sum(r.on_surface(f, m) for f, m in parts) >= on + _Whole(whole, on).margin:
         return True
