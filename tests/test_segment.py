@@ -393,7 +393,6 @@ def test_a_small_object_or_one_no_solid_draws_with_its_neighbour_is_split(
         assert min(_segmented_ious(frame, gt).values()) < 0.7
 
 
-
 def test_a_lying_bottle_split_at_a_dent_is_rejoined_but_touching_objects_are_not():
     """A lying bottle whose evidence has a deep dent on one side (where its glass read the
     table) is cut there by :func:`split_touching`: two short solids draw the dented region
@@ -433,6 +432,7 @@ def test_a_lying_bottle_split_at_a_dent_is_rejoined_but_touching_objects_are_not
     pair = [Candidate(ids == k, 1.0) for k in (1, 2)]
     assert len(rejoined(pair, K, plane, sparse, ids > 0)) == 2
     assert len(rejoined(pair, K, plane, np.zeros_like(depth), ids > 0)) == 1
+
 
 @pytest.mark.slow
 def test_a_standing_bottle_a_lying_one_leans_on_is_split_from_it(tmp_path):
