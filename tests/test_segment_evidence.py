@@ -99,6 +99,33 @@ def test_the_opaque_veto_is_what_rejects_the_box(monkeypatch):
     assert instance_ious(found.ids, ids)[1] > 0.7
 
 
+def test_touching_opaque_objects_read_like_glass_are_dropped_before_any_split_is_judged(
+        monkeypatch):
+    """Two dark cases side by side whose readings break like glass's (half of them missing) make
+    one region; its colour replaces the table's, so it is dropped without a revolution fit spent
+    on judging its split. Judged (the colour rule off), the same region takes split_touching's
+    fits and comes out as two instances, one per case."""
+    rgb, depth, plane = _table_frame((150, 150, 150))
+    glass = [[0, 0], [0.03, 0], [0.033, 0.1], [0, 0.1]]
+    ids, _, _, body_depth = solids_on_table([(glass, 0.1, -0.032, 0.0),
+                                             (glass, 0.1, 0.034, 0.01)])
+    body = ids > 0
+    assert cv2.connectedComponents(body.astype(np.uint8))[0] == 2  # touching: one region
+    broken = np.where(np.random.default_rng(3).random(SHAPE) < 0.5, 0.0, body_depth)
+    depth = np.where(body, broken, depth)
+    rgb[body] = (30, 30, 35)
+    fits = []
+    real_fit = tf.fit_revolution
+    monkeypatch.setattr(tf, "fit_revolution", lambda *a, **k: fits.append(1) or real_fit(*a, **k))
+    assert _segment(rgb, depth).objects == []
+    assert fits == []
+    monkeypatch.setattr(tf, "OPAQUE_COLOUR", np.inf)
+    found = _segment(rgb, depth)
+    assert len(fits) >= 3  # the whole and both parts of at least one cut
+    assert len(found.objects) == 2
+    assert min(instance_ious(found.ids, ids).values()) > 0.7
+
+
 def test_a_glass_seen_through_is_found_and_grown_to_its_outline():
     """A glass whose readings fail only in a band (its lower half) while its upper half reads
     the table through it; its outline shows as a bright rim. The depth evidence alone covers
