@@ -172,6 +172,32 @@ def test_touching_glasses_are_split_but_a_goblet_is_not():
     assert len(split_touching(ids > 0, K, plane)) == 1
 
 
+def test_a_part_opaque_as_a_whole_is_not_split_again():
+    """Three glasses in a row are cut in two rounds, one per glass. A part the ``opaque``
+    predicate marks (here: the part holding two glasses) stays whole, with no fit spent on
+    judging its cuts; a region it marks is not split at all."""
+    from sr3d_cli.segment import training_free as tf
+
+    glass = [[0, 0], [0.03, 0], [0.033, 0.1], [0, 0.1]]
+    ids, K, plane, _ = solids_on_table([(glass, 0.1, -0.066, 0.0), (glass, 0.1, 0.0, 0.0),
+                                        (glass, 0.1, 0.066, 0.0)])
+    region = ids > 0
+    assert cv2.connectedComponents(region.astype(np.uint8))[0] == 2  # one region
+    one = max(int((ids == k).sum()) for k in (1, 2, 3))
+    parts = tf.split_touching(region, K, plane)
+    assert len(parts) == 3
+    assert min(instance_ious(np.argmax(np.stack([np.zeros_like(region)] + parts), 0),
+                             ids).values()) > 0.9
+
+    def pairs(mask):
+        return mask is not region and mask.sum() > 1.5 * one
+
+    kept = tf.split_touching(region, K, plane, opaque=pairs)
+    assert len(kept) == 2
+    assert sorted(round(p.sum() / one) for p in kept) == [1, 2]
+    assert tf.split_touching(region, K, plane, opaque=lambda m: True) == [region]
+
+
 def test_a_vial_against_a_glass_is_split_by_the_readings_but_a_goblet_or_bottle_is_not():
     """A thin vial touching a glass's side has no neck the watershed could cut at, and the
     outline alone does not split them; the raw readings on the vial (a sensor's sparse front-

@@ -23,7 +23,7 @@ The steps:
    apart on the table (one object behind another), kept split only where solids of revolution
    on the table explain the parts clearly better than the whole (the revolution fit of
    :mod:`sr3d_cli.shape.revolution_fit`);
-7. a region whose colour replaces the table's as a whole dropped before its split is judged;
+7. a region or part whose colour replaces the table's as a whole not split, only dropped;
    instances that are too small or too large to be an object on the table dropped, those
    whose colour replaces the table's (an opaque object: glass shows the table through itself,
    :func:`table_colour_departure`) and those with no outline in colour at all (a sensor's
@@ -667,17 +667,20 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     kept = []
     least = max(min_area, int(MIN_IMAGE_SHARE * size))
     pieces = [p for p in pieces if p.sum() <= MAX_IMAGE_SHARE * size]
+
+    def by_colour(mask: np.ndarray) -> bool:
+        return looks_opaque(mask, departure)
+
     for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
-        # a region opaque by its colour as a whole is dropped before its split is judged (the
-        # revolution fits are most of segment's time): on the shared real, extsim and
-        # generated frames no part of one is ever kept, and a glass whose colour departs from
-        # the table's is found by its readings instead (standing_bodies)
-        if looks_opaque(region, departure):
-            continue
+        # a region or part opaque by its colour as a whole is not split (the revolution fits
+        # are most of segment's time), only dropped: on the shared real, extsim and generated
+        # frames no part of one is ever kept, and a glass whose colour departs from the
+        # table's is found by its readings instead (standing_bodies)
         for mask in split_touching(region, K, plane, depth=depth_m, glass=glass,
-                                   close_radius=close_radius, min_area=min_area):
-            if least <= mask.sum() <= MAX_IMAGE_SHARE * size and \
-                    not looks_opaque(mask, departure) and shows_outline(mask, departure):
+                                   close_radius=close_radius, min_area=min_area,
+                                   opaque=by_colour):
+            if least <= mask.sum() <= MAX_IMAGE_SHARE * size and not by_colour(mask) and \
+                    shows_outline(mask, departure):
                 kept.append(Candidate(mask, float(glass[mask].mean())))
     # never grown into: another instance, or an opaque object and the band of missing readings
     # a stereo camera leaves around it
@@ -1343,7 +1346,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
                    depth: np.ndarray | None = None, glass: np.ndarray | None = None,
                    close_radius: int = 6, max_pieces: int = 4,
                    gain: float = SPLIT_GAIN, min_share: float = 0.2, min_area: int = 150,
-                   whole=None, rounds: int = 2) -> list[np.ndarray]:
+                   whole=None, rounds: int = 2, opaque=None) -> list[np.ndarray]:
     """Split a region made of touching objects where solids of revolution on the table explain
     the parts clearly better than one explains the whole.
 
@@ -1388,6 +1391,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     that holds wins (readings first; among those, a footprint cut only where no other holds,
     its edge being only as fine as the readings) and each part is split again, ``rounds``
     levels deep (``whole``: the region's fit, given with each part of a region already cut).
+    A region or part for which ``opaque(mask)`` holds (a predicate on an (H, W) bool mask) is
+    not split: an opaque object's parts are all dropped, and judging them only spends fits.
     Where one part stands in front of the other (:func:`~sr3d_cli.geometry.occlusion.in_front`),
     the part behind is fitted with the front part's pixels as hidden, so that it may reach down
     behind it (:func:`~sr3d_cli.shape.revolution_fit.fit_revolution`'s ``occluders``),
@@ -1396,7 +1401,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     alone, a glass behind a glass stands where the front one's outline crosses it, and its
     readings miss it (seed 2700 frame 22: 24 of them on it, 56 when placed 4% nearer).
     """
-    if rounds < 1:
+    if rounds < 1 or (opaque is not None and opaque(region)):
         return [region]
     is_part = whole is not None  # of a region already cut
     area = float(region.sum())
@@ -1439,7 +1444,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             for part in split_touching(mask, K, plane, depth=depth, glass=glass,
                                        close_radius=close_radius, max_pieces=max_pieces,
                                        gain=gain, min_share=min_share, min_area=min_area,
-                                       whole=own, rounds=rounds - 1)]
+                                       whole=own, rounds=rounds - 1, opaque=opaque)]
 
 
 def merge_pieces(pieces: list[np.ndarray], shape: tuple[int, int], *, radius: int
