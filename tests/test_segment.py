@@ -178,9 +178,8 @@ def test_a_part_opaque_as_a_whole_is_not_split_again():
     judging its cuts; a region it marks is not split at all."""
     from sr3d_cli.segment import training_free as tf
 
-    glass = [[0, 0], [0.03, 0], [0.033, 0.1], [0, 0.1]]
-    ids, K, plane, _ = solids_on_table([(glass, 0.1, -0.066, 0.0), (glass, 0.1, 0.0, 0.0),
-                                        (glass, 0.1, 0.066, 0.0)])
+    ids, K, plane, _ = solids_on_table([(GLASS, 0.1, -0.066, 0.0), (GLASS, 0.1, 0.0, 0.0),
+                                        (GLASS, 0.1, 0.066, 0.0)])
     region = ids > 0
     assert cv2.connectedComponents(region.astype(np.uint8))[0] == 2  # one region
     one = max(int((ids == k).sum()) for k in (1, 2, 3))

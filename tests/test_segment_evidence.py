@@ -106,9 +106,8 @@ def test_touching_opaque_objects_read_like_glass_are_dropped_before_any_split_is
     on judging its split. Judged (the colour rule off), the same region takes split_touching's
     fits and comes out as two instances, one per case."""
     rgb, depth, plane = _table_frame((150, 150, 150))
-    glass = [[0, 0], [0.03, 0], [0.033, 0.1], [0, 0.1]]
-    ids, _, _, body_depth = solids_on_table([(glass, 0.1, -0.032, 0.0),
-                                             (glass, 0.1, 0.034, 0.01)])
+    ids, _, _, body_depth = solids_on_table([(GLASS, 0.1, -0.032, 0.0),
+                                             (GLASS, 0.1, 0.034, 0.01)])
     body = ids > 0
     assert cv2.connectedComponents(body.astype(np.uint8))[0] == 2  # touching: one region
     broken = np.where(np.random.default_rng(3).random(SHAPE) < 0.5, 0.0, body_depth)
