@@ -3,14 +3,18 @@
 - ``realdata``: ../shared/realdata (real D4xx frames, painted-object or CAD ground truth), the
   whole default ``repair-depth`` from the raw frame, no masks given: segmentation against the
   true objects, invented depth off the objects, object depth beside raw depth and OpenCV
-  inpainting given the true masks, seconds per frame on one core.
+  inpainting given the true masks, seconds per frame on one core, the pose error of the placed
+  objects where the frames give true poses (Tracebot), and the peak memory of one
+  ``sr3d repair-depth`` worker over the frames.
 - ``extsim``: ../shared/extsim (an independent renderer, scanned household meshes), the same
-  pipeline plus grasps judged on the true meshes.
+  pipeline plus the pose error and grasps judged on the true meshes.
 """
 
 from __future__ import annotations
 
+import os
 import shutil
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -24,6 +28,7 @@ from sr3d_cli.evaluate import depth_metrics, instance_ious, mean_metrics
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.io.images import write_depth
 from sr3d_cli.pipeline import Pipeline
+from sr3d_cli.pose_error import MATCH_IOU, evaluate_frame_poses, summarise
 from sr3d_cli.repair import inpaint_fill, plane_fill
 
 from common import SHARED, one_core, staged, timed_repair
@@ -53,13 +58,40 @@ def invented_share(repaired: np.ndarray, raw: np.ndarray, truth: np.ndarray) -> 
     return float((far & changed).sum() / truth.size)
 
 
+def frame_poses(scene, fid: str) -> list[dict]:
+    """Pose error rows (:func:`~sr3d_cli.pose_error.evaluate_frame_poses`) of a frame's true
+    objects; a true object counts as not placed where the pipeline placed nothing. Empty where
+    the frame gives no true poses (ClearGrasp)."""
+    truth = scene.load_gt_objects(fid)
+    if not truth or not truth.get("objects"):
+        return []
+    found = evaluate_frame_poses(scene, fid)
+    if found is None:
+        return [{"id": int(o["id"]), "label": o.get("label", ""), "pred_id": None}
+                for o in truth["objects"]]
+    return found["objects"]
+
+
+def peak_memory_mib(root: Path, out: Path) -> float:
+    """Peak resident memory (MiB) of one ``sr3d repair-depth --workers 1`` process (a batch
+    worker) run on every frame below ``root``, outputs written to ``out`` (emptied first)."""
+    shutil.rmtree(out, ignore_errors=True)
+    sr3d = Path(sys.executable).with_name("sr3d")
+    proc = subprocess.Popen([str(sr3d), "repair-depth", str(root), "--out", str(out),
+                             "--workers", "1", "-q"])
+    _, status, usage = os.wait4(proc.pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise RuntimeError(f"sr3d repair-depth {root} failed (exit {status})")
+    return usage.ru_maxrss / 1024  # KiB on Linux
+
+
 def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
     """The whole default pipeline on every frame below ``root`` (its ground truth never read
     by the pipeline); numbers as described in the module docstring. ``work`` is emptied first:
     every stage runs, and is timed, on the current code."""
     shutil.rmtree(work, ignore_errors=True)
     rows = {m: [] for m in ("raw", "plane-fill", "inpaint", "sr3d")}
-    ious, false, invented, timings, frames, judged = [], [], [], [], [], []
+    ious, false, invented, timings, frames, judged, poses = [], [], [], [], [], [], []
     planner = None
     if grasps:
         from sr3d_cli.grasp.planner import Planner
@@ -103,6 +135,7 @@ def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
                     stages.grasp_frame(frame, planner, cfg.plane, "repaired")
                     t["grasp"] = time.perf_counter() - t0
                 judged.append(stages.evaluate_grasp_frame(scene, fid, cfg))
+            poses += frame_poses(scene, fid)
             frames.append(scene.frame_key(fid))
             print(scene.frame_key(fid), "IoU", [round(v, 2) for v in seg["best_iou"].values()],
                   "false", seg["false"], f"inv {invented[-1]*100:.2f}%", f"sr3d {rows['sr3d'][-1]['mae'] * 1000:.1f} mm",
@@ -117,6 +150,8 @@ def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
            "seconds": {k: float(np.median([t[k] for t in timings if k in t]))
                        for k in (*STAGES, "grasp") if any(k in t for t in timings)},
            "max_seconds": float(max(t["total"] for t in timings))}
+    if poses:
+        out["pose"] = summarise(poses)
     if judged:
         from sr3d_cli.grasp.quality import overall
 
@@ -130,7 +165,9 @@ def realdata_section(work: Path, cfg: Config) -> dict:
     root = SHARED / "realdata"
     if not root.is_dir():
         return {"skipped": f"{root} not present"}
-    return run_set(root, work / "realdata_nomask", cfg)
+    out = run_set(root, work / "realdata_nomask", cfg)
+    out["peak_mib"] = peak_memory_mib(root, work / "realdata_memory")
+    return out
 
 
 def extsim_section(work: Path, cfg: Config) -> dict:
@@ -169,6 +206,22 @@ def report(results: dict) -> list[str]:
                   "- median seconds per frame on one core: " + ", ".join(
                       f"{k} {v:.2f}" for k, v in r["seconds"].items())
                   + f"; slowest frame {r['max_seconds']:.1f} s"]
+        if "peak_mib" in r:
+            lines.append(f"- peak memory of one `sr3d repair-depth` worker over the frames: "
+                         f"{r['peak_mib']:.0f} MiB")
+        if "pose" in r:
+            p = r["pose"]
+            lines.append(
+                f"- pose of the objects with a true pose: {p['matched']} of {p['objects']} "
+                f"placed (mask IoU >= {MATCH_IOU}); median axis angle "
+                f"{p['median_axis_deg']:.1f} deg, base translation "
+                f"{p['median_translation_mm']:.1f} mm, height {p['median_scale_pct']:.1f}%, "
+                f"ADD-S {p['median_add_s_mm']:.1f} mm (mean {p['mean_add_s_mm']:.1f} mm); "
+                "`sr3d_cli/pose_error.py`: the angle between the z axes (a surface of "
+                "revolution's turn about its axis is no error; an object placed upside down "
+                "is 180 deg off), the distance between the base centres, the placed height "
+                "against the true one, and the mean distance from the true surface to the "
+                "placed one")
         if "grasp" in r:
             g = r["grasp"]
             lines.append(f"- grasps: {g['objects']} objects, {g['objects_with_grasps']} with "
