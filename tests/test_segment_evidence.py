@@ -179,6 +179,27 @@ def test_a_glass_read_smoothly_as_a_real_camera_does_is_found_whole(monkeypatch)
     assert _segment(rgb, depth).objects == []
 
 
+def test_a_glass_on_a_cloth_that_reads_nothing_is_judged_by_the_cloths_colour(monkeypatch):
+    """A smoothly read glass standing on a white cloth the sensor returns nothing from (no
+    table reading within the window its colour is judged over): it shows the cloth's colour
+    through itself, not the table's, and is found. Judged against the table's colour only
+    (NaN where the cloth hides the table), it is not."""
+    rgb, depth, plane = _table_frame((150, 150, 150))
+    depth, ids = _smooth_front_glass(rgb, depth)
+    body = ids > 0
+    ys, xs = np.nonzero(body)
+    cloth = np.zeros(SHAPE, bool)
+    cloth[max(ys.min() - 80, 0):ys.max() + 60, max(xs.min() - 120, 0):xs.max() + 120] = True
+    depth = np.where(cloth & ~body, 0.0, depth)
+    rgb[cloth] = (255 - (255 - rgb[cloth].astype(float)) * 0.35).astype(np.uint8)
+    found = _segment(rgb, depth)
+    assert len(found.objects) == 1 and instance_ious(found.ids, ids)[1] > 0.95
+    plain = tf.table_colour_departure
+    monkeypatch.setattr(tf, "table_colour_departure",
+                        lambda *a, surroundings=False, **k: plain(*a, **k))
+    assert _segment(rgb, depth).objects == []
+
+
 def test_a_bodys_mask_leaves_the_tables_bumps_beside_it(monkeypatch):
     """A stereo camera reads bumps a few millimetres high on a plain table; three 8 mm bumps
     touching a smoothly read glass join its body through the closing, but stand beside its

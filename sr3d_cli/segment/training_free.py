@@ -237,10 +237,13 @@ def on_table_readings(depth_m: np.ndarray, K: np.ndarray, plane: Plane
 
 
 def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray,
-                           window: int = COLOUR_WINDOW) -> np.ndarray:
+                           window: int = COLOUR_WINDOW, surroundings: bool = False) -> np.ndarray:
     """How far each pixel's colour departs from the table's colour around it ``(H, W) float``,
     in units of the table's own spread (the 90th percentile of table pixels' departure, at
-    least :data:`LEAST_SPREAD`), NaN where no table reading lies within ``window`` pixels.
+    least :data:`LEAST_SPREAD`), NaN where no table reading lies within ``window`` pixels;
+    with ``surroundings``, the departure there from the mean colour of all the window's
+    pixels instead (inside a dropout, a cloth the sensor returns nothing from, what an object
+    stands on is known by its colour alone).
 
     The table's local colour is the mean CIELAB colour of the pixels whose readings lie on the
     table, within the window. A transparent object shows the table through itself, so over
@@ -253,8 +256,14 @@ def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray,
     local = cv2.blur(lab * weight[..., None], (window, window)) / np.maximum(share, 1e-6)[..., None]
     departure = np.linalg.norm(lab - local, axis=2)
     spread = np.percentile(departure[on_table], 90) if on_table.any() else 0.0
-    out = departure / max(float(spread), LEAST_SPREAD)
-    out[share <= 0.05] = np.nan
+    scale = max(float(spread), LEAST_SPREAD)
+    out = departure / scale
+    unknown = share <= 0.05
+    if surroundings and unknown.any():
+        around = cv2.blur(lab, (window, window))
+        out[unknown] = np.linalg.norm(lab - around, axis=2)[unknown] / scale
+    else:
+        out[unknown] = np.nan
     return out
 
 
@@ -477,7 +486,9 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.nd
     A real stereo camera often reads a glass's front surface smoothly, so a standing glass
     looks like an opaque object by its depth alone; what gives it away is that it shows the
     table's colour through itself (:data:`BODY_SEES_TABLE`) and that the sensor fails
-    somewhere on it (:data:`BODY_HOLES`). A body: the readings clearly above the table joined
+    somewhere on it (:data:`BODY_HOLES`). Where no table reading lies within
+    :data:`SEE_THROUGH_WINDOW` of it (a glass on a white cloth the sensor returns nothing
+    from), it is the colour of its surroundings it must show. A body: the readings clearly above the table joined
     to one at least :data:`BODY_SEED_HEIGHT` high (the table's own bumps never reach that),
     closed and filled, at least ``min_area`` pixels and :data:`BODY_HEIGHT` tall; it is judged
     by all of them.
@@ -497,7 +508,8 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.nd
         return []
     own = _closed(over_feet(seeded, seeded & high, depth_m, K, plane, BODY_FEET_REACH),
                   close_radius)
-    departure = table_colour_departure(rgb, ev.on_table, window=SEE_THROUGH_WINDOW)
+    departure = table_colour_departure(rgb, ev.on_table, window=SEE_THROUGH_WINDOW,
+                                       surroundings=True)
     valid = depth_m > 0
     out = []
     for k in range(1, count):
