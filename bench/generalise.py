@@ -4,8 +4,9 @@
   whole default ``repair-depth`` from the raw frame, no masks given: segmentation against the
   true objects, invented depth off the objects, object depth beside raw depth and OpenCV
   inpainting given the true masks, seconds per frame on one core, the pose error of the placed
-  objects where the frames give true poses (Tracebot), and the peak memory of one
-  ``sr3d repair-depth`` worker over the frames.
+  objects where the frames give true poses (Tracebot), the peak memory of one
+  ``sr3d repair-depth`` worker over the frames, and segmentation on the same frames with a
+  white cloth that returns no readings under their objects (a simulated dropout).
 - ``extsim``: ../shared/extsim (an independent renderer, scanned household meshes), the same
   pipeline plus the pose error and grasps judged on the true meshes.
 """
@@ -30,6 +31,7 @@ from sr3d_cli.io.images import write_depth
 from sr3d_cli.pipeline import Pipeline
 from sr3d_cli.pose_error import MATCH_IOU, evaluate_frame_poses, summarise
 from sr3d_cli.repair import inpaint_fill, plane_fill
+from sr3d_cli.segment import Segmenter
 
 from common import SHARED, one_core, staged, timed_repair
 
@@ -37,6 +39,8 @@ DETECTED_IOU = 0.5  # a true object is found when an instance overlaps it this w
 FALSE_IOU, FALSE_AREA = 0.2, 300  # an instance this large overlapping no object this well
 INVENTED_REACH, INVENTED_CHANGE = 15, 0.01  # px from every object; metres of change
 STAGES = ("segment", "reconstruct", "align", "render", "total")
+CLOTH_REACH = (150, 100, 80)  # px at 1280 wide: the cloth beside, above and below the objects
+CLOTH_WHITE = 0.35  # share of each pixel's distance to white kept under the cloth
 
 
 def segmentation_scores(pred: np.ndarray, truth: np.ndarray) -> dict:
@@ -83,6 +87,45 @@ def peak_memory_mib(root: Path, out: Path) -> float:
     if os.waitstatus_to_exitcode(status) != 0:
         raise RuntimeError(f"sr3d repair-depth {root} failed (exit {status})")
     return usage.ru_maxrss / 1024  # KiB on Linux
+
+
+def under_white_cloth(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The frame with a white cloth that returns no readings laid under its true objects: over
+    their box widened by :data:`CLOTH_REACH`, every reading but the objects' own is dropped and
+    every pixel moved towards white (:data:`CLOTH_WHITE`; a glass shows the cloth through
+    itself, its edges and highlights kept). rgb (H, W, 3) uint8, depth (H, W) metres, truth
+    (H, W) int ids; returns the new rgb and depth."""
+    ys, xs = np.nonzero(truth > 0)
+    s = truth.shape[1] / 1280
+    side, above, below = (int(round(r * s)) for r in CLOTH_REACH)
+    cloth = np.zeros(truth.shape, bool)
+    cloth[max(ys.min() - above, 0):ys.max() + below + 1,
+          max(xs.min() - side, 0):xs.max() + side + 1] = True
+    out = rgb.astype(np.float32)
+    out[cloth] = 255 - (255 - out[cloth]) * CLOTH_WHITE
+    return out.astype(np.uint8), np.where(cloth & (truth == 0), 0.0, depth)
+
+
+def cloth_scores(root: Path, cfg: Config) -> dict:
+    """Segmentation alone (the default segmenter) on every frame below ``root`` laid on a white
+    cloth (:func:`under_white_cloth`): detection, mean best IoU and false instances per
+    frame, as :func:`segmentation_scores` counts them."""
+    segmenter = Segmenter(cfg.segment, cfg.plane)
+    ious, false = [], []
+    for scene in discover_scenes(root, IOConfig(), None):
+        for fid in scene.frame_ids():
+            frame = scene.load_frame(fid)
+            truth = scene.load_mask(scene.gt_mask_path(fid), frame.depth_m.shape)
+            rgb, depth = under_white_cloth(frame.rgb, frame.depth_m, truth)
+            seg = segmentation_scores(segmenter(fid, rgb, depth, frame.camera.K).ids, truth)
+            ious += list(seg["best_iou"].values())
+            false.append(seg["false"])
+            print(scene.frame_key(fid), "on a white cloth: IoU",
+                  [round(v, 2) for v in seg["best_iou"].values()], "false", seg["false"],
+                  file=sys.stderr)
+    return {"objects": len(ious), "detection": float(np.mean([v >= DETECTED_IOU for v in ious])),
+            "mean_iou": float(np.mean(ious)), "false_per_frame": float(np.mean(false))}
 
 
 def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
@@ -167,6 +210,7 @@ def realdata_section(work: Path, cfg: Config) -> dict:
         return {"skipped": f"{root} not present"}
     out = run_set(root, work / "realdata_nomask", cfg)
     out["peak_mib"] = peak_memory_mib(root, work / "realdata_memory")
+    out["cloth"] = cloth_scores(root, cfg)
     return out
 
 
@@ -209,6 +253,13 @@ def report(results: dict) -> list[str]:
         if "peak_mib" in r:
             lines.append(f"- peak memory of one `sr3d repair-depth` worker over the frames: "
                          f"{r['peak_mib']:.0f} MiB")
+        if "cloth" in r:
+            c = r["cloth"]
+            lines.append(f"- on a white cloth that returns no readings, laid under the objects "
+                         f"(simulated: every reading but the objects' own dropped, the pixels "
+                         f"moved towards white; segment alone): detected {c['detection']:.2f}, "
+                         f"mean best IoU {c['mean_iou']:.3f}, false instances per frame "
+                         f"{c['false_per_frame']:.2f}")
         if "pose" in r:
             p = r["pose"]
             lines.append(
