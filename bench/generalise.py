@@ -6,7 +6,8 @@
   inpainting given the true masks, seconds per frame on one core, the pose error of the placed
   objects where the frames give true poses (Tracebot), the peak memory of one
   ``sr3d repair-depth`` worker over the frames, and segmentation on the same frames with a
-  white cloth that returns no readings under their objects (a simulated dropout).
+  white cloth that returns no readings under their objects (a simulated dropout) and, on the
+  one-object frames, with the object copied beside itself (two alike side by side).
 - ``extsim``: ../shared/extsim (an independent renderer, scanned household meshes), the same
   pipeline plus the pose error and grasps judged on the true meshes.
 """
@@ -41,6 +42,8 @@ INVENTED_REACH, INVENTED_CHANGE = 15, 0.01  # px from every object; metres of ch
 STAGES = ("segment", "reconstruct", "align", "render", "total")
 CLOTH_REACH = (150, 100, 80)  # px at 1280 wide: the cloth beside, above and below the objects
 CLOTH_WHITE = 0.35  # share of each pixel's distance to white kept under the cloth
+PAIR_GAPS = (40, 100)  # px at 1280 wide between a one-object frame's object and its copy
+PAIR_BAND = 15  # px at 1280 wide around the object copied with it (its holes, its shadow)
 
 
 def segmentation_scores(pred: np.ndarray, truth: np.ndarray) -> dict:
@@ -128,6 +131,63 @@ def cloth_scores(root: Path, cfg: Config) -> dict:
             "mean_iou": float(np.mean(ious)), "false_per_frame": float(np.mean(false))}
 
 
+def beside_itself(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, gap: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The frame with its one true object copied beside itself, ``gap`` px (at 1280 wide) to
+    its right: the colour of the object and of the :data:`PAIR_BAND` around it, and the
+    readings of the object and the band's missing ones (its holes and stereo shadow; the
+    table's readings there stay). rgb (H, W, 3) uint8, depth (H, W) metres, truth (H, W) ids;
+    returns rgb, depth and the ids (1: the object, 2: the copy), or None where the copy would
+    leave the frame."""
+    s = truth.shape[1] / 1280
+    obj = truth > 0
+    xs = np.nonzero(obj.any(axis=0))[0]
+    shift = int(xs[-1] - xs[0] + 1 + round(gap * s))
+    band = 2 * int(round(PAIR_BAND * s)) + 1
+    zy, zx = np.nonzero(cv2.dilate(obj.astype(np.uint8), np.ones((band, band), np.uint8)))
+    if zx.max() + shift >= truth.shape[1]:
+        return None
+    rgb, out, ids = rgb.copy(), depth.copy(), obj.astype(np.int32)
+    rgb[zy, zx + shift] = rgb[zy, zx]
+    own = obj[zy, zx] | (depth[zy, zx] <= 0)
+    out[zy[own], zx[own] + shift] = depth[zy[own], zx[own]]
+    oy, ox = np.nonzero(obj)
+    ids[oy, ox + shift] = 2
+    return rgb, out, ids
+
+
+def pair_scores(root: Path, cfg: Config) -> dict:
+    """Segmentation alone (the default segmenter) on every one-object frame below ``root``
+    with its object copied beside itself (:func:`beside_itself`) at each of
+    :data:`PAIR_GAPS`: ``{gap: {detection, mean_iou, false_per_frame, frames}}``."""
+    segmenter = Segmenter(cfg.segment, cfg.plane)
+    out = {}
+    for gap in PAIR_GAPS:
+        ious, false = [], []
+        for scene in discover_scenes(root, IOConfig(), None):
+            for fid in scene.frame_ids():
+                frame = scene.load_frame(fid)
+                truth = scene.load_mask(scene.gt_mask_path(fid), frame.depth_m.shape)
+                if len(np.unique(truth[truth > 0])) != 1:
+                    continue
+                made = beside_itself(frame.rgb, frame.depth_m, truth, gap)
+                if made is None:
+                    continue
+                rgb, depth, ids = made
+                seg = segmentation_scores(segmenter(fid, rgb, depth, frame.camera.K).ids, ids)
+                ious += list(seg["best_iou"].values())
+                false.append(seg["false"])
+                print(scene.frame_key(fid), f"beside itself {gap} px: IoU",
+                      [round(v, 2) for v in seg["best_iou"].values()], "false", seg["false"],
+                      file=sys.stderr)
+        if ious:
+            out[str(gap)] = {"frames": len(false), "detection":
+                             float(np.mean([v >= DETECTED_IOU for v in ious])),
+                             "mean_iou": float(np.mean(ious)),
+                             "false_per_frame": float(np.mean(false))}
+    return out
+
+
 def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
     """The whole default pipeline on every frame below ``root`` (its ground truth never read
     by the pipeline); numbers as described in the module docstring. ``work`` is emptied first:
@@ -211,6 +271,7 @@ def realdata_section(work: Path, cfg: Config) -> dict:
     out = run_set(root, work / "realdata_nomask", cfg)
     out["peak_mib"] = peak_memory_mib(root, work / "realdata_memory")
     out["cloth"] = cloth_scores(root, cfg)
+    out["pair"] = pair_scores(root, cfg)
     return out
 
 
@@ -260,6 +321,13 @@ def report(results: dict) -> list[str]:
                          f"moved towards white; segment alone): detected {c['detection']:.2f}, "
                          f"mean best IoU {c['mean_iou']:.3f}, false instances per frame "
                          f"{c['false_per_frame']:.2f}")
+        if r.get("pair"):
+            lines.append("- two alike side by side (simulated: each one-object frame's object "
+                         "with the band around it copied beside itself; segment alone): " +
+                         "; ".join(f"{gap} px apart at 1280 px ({p['frames']} frames): detected "
+                                   f"{p['detection']:.2f}, mean best IoU {p['mean_iou']:.3f}, "
+                                   f"false instances per frame {p['false_per_frame']:.2f}"
+                                   for gap, p in r["pair"].items()))
         if "pose" in r:
             p = r["pose"]
             lines.append(
