@@ -87,8 +87,9 @@ def peak_memory_mib(root: Path, out: Path) -> float:
     proc = subprocess.Popen([str(sr3d), "repair-depth", str(root), "--out", str(out),
                              "--workers", "1", "-q"])
     _, status, usage = os.wait4(proc.pid, 0)
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError(f"sr3d repair-depth {root} failed (exit {status})")
+    code = os.waitstatus_to_exitcode(status)
+    if code != 0:
+        raise RuntimeError(f"sr3d repair-depth {root} failed (exit code {code})")
     return usage.ru_maxrss / 1024  # KiB on Linux
 
 

@@ -236,8 +236,8 @@ def on_table_readings(depth_m: np.ndarray, K: np.ndarray, plane: Plane
     return height, on_table
 
 
-def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray,
-                           window: int = COLOUR_WINDOW, surroundings: bool = False) -> np.ndarray:
+def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray, window: int = COLOUR_WINDOW,
+                           surroundings: bool = False) -> np.ndarray:
     """How far each pixel's colour departs from the table's colour around it ``(H, W) float``,
     in units of the table's own spread (the 90th percentile of table pixels' departure, at
     least :data:`LEAST_SPREAD`), NaN where no table reading lies within ``window`` pixels;
@@ -488,10 +488,10 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.nd
     table's colour through itself (:data:`BODY_SEES_TABLE`) and that the sensor fails
     somewhere on it (:data:`BODY_HOLES`). Where no table reading lies within
     :data:`SEE_THROUGH_WINDOW` of it (a glass on a white cloth the sensor returns nothing
-    from), it is the colour of its surroundings it must show. A body: the readings clearly above the table joined
-    to one at least :data:`BODY_SEED_HEIGHT` high (the table's own bumps never reach that),
-    closed and filled, at least ``min_area`` pixels and :data:`BODY_HEIGHT` tall; it is judged
-    by all of them.
+    from), it is the colour of its surroundings it must show. A body: the readings clearly
+    above the table joined to one at least :data:`BODY_SEED_HEIGHT` high (the table's own
+    bumps never reach that), closed and filled, at least ``min_area`` pixels and
+    :data:`BODY_HEIGHT` tall; it is judged by all of them.
 
     Its mask keeps only the readings that stand over the object's own footprint: those at
     least :data:`BODY_SEED_HEIGHT` high and the lower ones whose foot on the table lies
