@@ -111,25 +111,38 @@ def under_white_cloth(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray
     return out.astype(np.uint8), np.where(cloth & (truth == 0), 0.0, depth)
 
 
-def cloth_scores(root: Path, cfg: Config) -> dict:
-    """Segmentation alone (the default segmenter) on every frame below ``root`` laid on a white
-    cloth (:func:`under_white_cloth`): detection, mean best IoU and false instances per
-    frame, as :func:`segmentation_scores` counts them."""
+def segment_modified(root: Path, cfg: Config, make, label: str) -> dict:
+    """Segmentation alone (the default segmenter) on every frame below ``root`` as ``make``
+    changes it: ``make(frame, truth)`` returns (rgb, depth, true ids) or None to skip the
+    frame. Totals as :func:`segmentation_scores` counts them: frames, objects, detection,
+    mean best IoU, false instances per frame."""
     segmenter = Segmenter(cfg.segment, cfg.plane)
     ious, false = [], []
     for scene in discover_scenes(root, IOConfig(), None):
         for fid in scene.frame_ids():
             frame = scene.load_frame(fid)
-            truth = scene.load_mask(scene.gt_mask_path(fid), frame.depth_m.shape)
-            rgb, depth = under_white_cloth(frame.rgb, frame.depth_m, truth)
+            made = make(frame, scene.load_mask(scene.gt_mask_path(fid), frame.depth_m.shape))
+            if made is None:
+                continue
+            rgb, depth, truth = made
             seg = segmentation_scores(segmenter(fid, rgb, depth, frame.camera.K).ids, truth)
             ious += list(seg["best_iou"].values())
             false.append(seg["false"])
-            print(scene.frame_key(fid), "on a white cloth: IoU",
+            print(scene.frame_key(fid), f"{label}: IoU",
                   [round(v, 2) for v in seg["best_iou"].values()], "false", seg["false"],
                   file=sys.stderr)
-    return {"objects": len(ious), "detection": float(np.mean([v >= DETECTED_IOU for v in ious])),
+    if not ious:
+        return {}
+    return {"frames": len(false), "objects": len(ious),
+            "detection": float(np.mean([v >= DETECTED_IOU for v in ious])),
             "mean_iou": float(np.mean(ious)), "false_per_frame": float(np.mean(false))}
+
+
+def cloth_scores(root: Path, cfg: Config) -> dict:
+    """:func:`segment_modified` on every frame below ``root`` laid on a white cloth
+    (:func:`under_white_cloth`)."""
+    return segment_modified(root, cfg, lambda frame, truth: (
+        *under_white_cloth(frame.rgb, frame.depth_m, truth), truth), "on a white cloth")
 
 
 def beside_itself(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, gap: int
@@ -158,35 +171,19 @@ def beside_itself(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, gap: in
 
 
 def pair_scores(root: Path, cfg: Config) -> dict:
-    """Segmentation alone (the default segmenter) on every one-object frame below ``root``
-    with its object copied beside itself (:func:`beside_itself`) at each of
-    :data:`PAIR_GAPS`: ``{gap: {detection, mean_iou, false_per_frame, frames}}``."""
-    segmenter = Segmenter(cfg.segment, cfg.plane)
-    out = {}
-    for gap in PAIR_GAPS:
-        ious, false = [], []
-        for scene in discover_scenes(root, IOConfig(), None):
-            for fid in scene.frame_ids():
-                frame = scene.load_frame(fid)
-                truth = scene.load_mask(scene.gt_mask_path(fid), frame.depth_m.shape)
-                if len(np.unique(truth[truth > 0])) != 1:
-                    continue
-                made = beside_itself(frame.rgb, frame.depth_m, truth, gap)
-                if made is None:
-                    continue
-                rgb, depth, ids = made
-                seg = segmentation_scores(segmenter(fid, rgb, depth, frame.camera.K).ids, ids)
-                ious += list(seg["best_iou"].values())
-                false.append(seg["false"])
-                print(scene.frame_key(fid), f"beside itself {gap} px: IoU",
-                      [round(v, 2) for v in seg["best_iou"].values()], "false", seg["false"],
-                      file=sys.stderr)
-        if ious:
-            out[str(gap)] = {"frames": len(false), "detection":
-                             float(np.mean([v >= DETECTED_IOU for v in ious])),
-                             "mean_iou": float(np.mean(ious)),
-                             "false_per_frame": float(np.mean(false))}
-    return out
+    """:func:`segment_modified` on every one-object frame below ``root`` with its object
+    copied beside itself (:func:`beside_itself`), at each of :data:`PAIR_GAPS`:
+    ``{gap: totals}``."""
+    def pair(gap: int):
+        def make(frame, truth):
+            if len(np.unique(truth[truth > 0])) != 1:
+                return None
+            return beside_itself(frame.rgb, frame.depth_m, truth, gap)
+        return make
+
+    found = {str(gap): segment_modified(root, cfg, pair(gap), f"beside itself {gap} px")
+             for gap in PAIR_GAPS}
+    return {gap: totals for gap, totals in found.items() if totals}
 
 
 def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
