@@ -197,6 +197,28 @@ def test_a_part_opaque_as_a_whole_is_not_split_again():
     assert tf.split_touching(region, K, plane, opaque=lambda m: True) == [region]
 
 
+def test_splits_answers_at_the_first_cut_that_holds(monkeypatch):
+    """``splits`` says whether ``split_touching`` cuts a region at all: three glasses in a row
+    are cut, one goblet is not; it stops judging at the first cut that holds, where
+    ``split_touching`` judges every cut and splits the parts again."""
+    from sr3d_cli.segment import training_free as tf
+
+    judged = []
+    judge = tf._judge_cut
+    monkeypatch.setattr(tf, "_judge_cut", lambda *a, **k: judged.append(1) or judge(*a, **k))
+    ids, K, plane, _ = solids_on_table([(GLASS, 0.1, -0.066, 0.0), (GLASS, 0.1, 0.0, 0.0),
+                                        (GLASS, 0.1, 0.066, 0.0)])
+    assert len(tf.split_touching(ids > 0, K, plane)) == 3
+    every = len(judged)
+    judged.clear()
+    assert tf.splits(ids > 0, K, plane)
+    assert 1 <= len(judged) < every
+    goblet = [[0, 0], [0.035, 0], [0.033, 0.004], [0.005, 0.01], [0.005, 0.07], [0.03, 0.09],
+              [0.04, 0.13], [0.036, 0.16], [0, 0.16]]
+    ids, K, plane, _ = solids_on_table([(goblet, 0.16, 0.0, 0.0)])
+    assert not tf.splits(ids > 0, K, plane)
+
+
 def test_a_vial_against_a_glass_is_split_by_the_readings_but_a_goblet_or_bottle_is_not():
     """A thin vial touching a glass's side has no neck the watershed could cut at, and the
     outline alone does not split them; the raw readings on the vial (a sensor's sparse front-

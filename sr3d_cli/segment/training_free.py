@@ -58,6 +58,9 @@ ON_TABLE_SHARE = 0.3  # least share of a candidate over the table's footprint
 SPLIT_GAIN = 0.03  # silhouette IoU a split of touching objects must gain (split_touching)
 SPLIT_READINGS = 0.25  # share of the whole's readings on its surface a split must add (ditto)
 SPLIT_PART_IOU = 0.85  # silhouette IoU both parts of a split made by the readings must reach
+SPLIT_PIECES = 4  # most watershed pieces a region is cut into for split judging
+SPLIT_SHARE = 0.2  # least share of a region each part of an outline cut keeps (a sliver of
+# background fits anything)
 CLEAR_GAIN = 2.0  # times the gain a cut of a whole no solid draws needs to hold by its outline
 # whatever its parts' own readings say (split_touching)
 HIDDEN_READINGS = 0.15  # share of its readings a part fitted with hidden pixels must explain
@@ -537,7 +540,7 @@ def with_bodies(found: list[Candidate], bodies: list[np.ndarray], evidence: np.n
     candidate (:data:`BODY_INSIDE`) is a part of it and adds nothing. A body that one
     candidate overlaps less is joined to it: that candidate's glass evidence covered only the
     part of the object the sensor failed on, unless the join is no longer ``one_object``
-    (a callable on an ``(H, W) bool`` mask: :func:`split_touching` leaves it whole). A body
+    (a callable on an ``(H, W) bool`` mask: :func:`splits` finds no cut). A body
     that two candidates share (:data:`BODY_SHARED` of it each) is touching objects the
     candidates have already parted, and adds nothing.
     """
@@ -707,8 +710,8 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     bodies = standing_bodies(rgb, depth_m, ev, K, plane, min_area=least, close_radius=close_radius)
 
     def one_object(mask: np.ndarray) -> bool:
-        return len(split_touching(mask, K, plane, depth=depth_m, glass=glass,
-                                  close_radius=close_radius, min_area=min_area)) == 1
+        return not splits(mask, K, plane, depth=depth_m, glass=glass,
+                          close_radius=close_radius, min_area=min_area)
 
     joined = with_bodies(out, bodies, glass | ev.above, one_object)
     # an object stands on the table; a band of dropouts along the table's edge, where the
@@ -1356,8 +1359,8 @@ def _judge_cut(reg: _Region, whole: _Whole, a: np.ndarray, b: np.ndarray, *,
 
 def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
                    depth: np.ndarray | None = None, glass: np.ndarray | None = None,
-                   close_radius: int = 6, max_pieces: int = 4,
-                   gain: float = SPLIT_GAIN, min_share: float = 0.2, min_area: int = 150,
+                   close_radius: int = 6, max_pieces: int = SPLIT_PIECES,
+                   gain: float = SPLIT_GAIN, min_share: float = SPLIT_SHARE, min_area: int = 150,
                    whole=None, rounds: int = 2, opaque=None) -> list[np.ndarray]:
     """Split a region made of touching objects where solids of revolution on the table explain
     the parts clearly better than one explains the whole.
@@ -1415,6 +1418,34 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     """
     if rounds < 1 or (opaque is not None and opaque(region)):
         return [region]
+    best = None  # (key, parts with their fits)
+    for key, parts in _held_cuts(region, K, plane, depth, glass, close_radius, max_pieces,
+                                 gain, min_share, min_area, whole):
+        if best is None or key > best[0]:
+            best = (key, parts)
+    if best is None:
+        return [region]
+    return [part for mask, own in best[1]
+            for part in split_touching(mask, K, plane, depth=depth, glass=glass,
+                                       close_radius=close_radius, max_pieces=max_pieces,
+                                       gain=gain, min_share=min_share, min_area=min_area,
+                                       whole=own, rounds=rounds - 1, opaque=opaque)]
+
+
+def splits(region: np.ndarray, K: np.ndarray, plane: Plane, *, depth: np.ndarray | None = None,
+           glass: np.ndarray | None = None, close_radius: int = 6, min_area: int = 150) -> bool:
+    """Whether :func:`split_touching` (default rules) cuts ``region`` ``(H, W) bool`` at all:
+    true at the first cut that holds, without judging the rest or splitting the parts."""
+    return any(True for _ in _held_cuts(region, K, plane, depth, glass, close_radius,
+                                        SPLIT_PIECES, SPLIT_GAIN, SPLIT_SHARE, min_area, None))
+
+
+def _held_cuts(region: np.ndarray, K: np.ndarray, plane: Plane, depth, glass, close_radius: int,
+               max_pieces: int, gain: float, min_share: float, min_area: int, whole):
+    """The cuts of ``region`` that hold (:func:`split_touching`'s rules and arguments), as
+    ``(key, ((a, fit_a), (b, fit_b)))`` in the order they are judged; the largest key is
+    the best cut. Lazy: the whole is fitted once a cut turns up, and each cut is judged only
+    when asked for."""
     is_part = whole is not None  # of a region already cut
     area = float(region.sum())
     cuts, rests = _outline_cuts(region, glass, max_pieces, min_share, min_area, close_radius)
@@ -1428,17 +1459,17 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             cuts.append(cut)
         cuts += attached
     if not cuts:
-        return [region]
+        return
     reg = _Region(region, K, plane, down_direction(region, K, plane), _PartFits(K, plane, depth),
                   readings, gain)
-    best, judged = None, None  # best: (by readings, score), parts with their fits
+    judged = None
     for i, (a, b) in enumerate(cuts):
         if readings is not None:
             readings.shares.clear()
         if whole is None:  # fitted once a cut turns up (most regions have none)
             whole = reg.fits(region)
         if whole is None:
-            return [region]
+            return
         if judged is None:
             judged = _Whole(whole, None if readings is None else
                             readings.on_surface(whole, region))
@@ -1447,16 +1478,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
         if held is None:
             continue
         by_readings, by_count, score, fa, fb = held
-        key = (by_readings, by_count, i != footprint, i not in rests, score)
-        if best is None or key > best[0]:
-            best = (key, ((a, fa), (b, fb)))
-    if best is None:
-        return [region]
-    return [part for mask, own in best[1]
-            for part in split_touching(mask, K, plane, depth=depth, glass=glass,
-                                       close_radius=close_radius, max_pieces=max_pieces,
-                                       gain=gain, min_share=min_share, min_area=min_area,
-                                       whole=own, rounds=rounds - 1, opaque=opaque)]
+        yield (by_readings, by_count, i != footprint, i not in rests, score), ((a, fa), (b, fb))
 
 
 def merge_pieces(pieces: list[np.ndarray], shape: tuple[int, int], *, radius: int
