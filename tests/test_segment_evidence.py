@@ -266,6 +266,28 @@ def test_an_instance_beyond_the_table_keeps_only_the_columns_above_its_base():
     assert (tf.within_table_columns(glass, footprint) == glass).all()
 
 
+def test_an_instance_rises_beyond_the_table_only_above_its_feet():
+    """The holes on the table beside a glass at the far edge join it and reach the edge; the
+    room's missing readings above them join both. With ``feet``, only the columns where the
+    part over the table reaches down to the glass's base keep what lies beyond the table."""
+    footprint = np.zeros((100, 100), bool)
+    footprint[40:] = True
+    glass = np.zeros_like(footprint)
+    glass[20:80, 30:50] = True  # its base at row 79, rising 20 rows above the edge
+    holes = np.zeros_like(footprint)
+    holes[40:55, 50:80] = True  # on the table beside it, up to the edge
+    room = np.zeros_like(footprint)
+    room[5:40, 50:90] = True  # beyond the edge, above the holes
+    mask = glass | holes | room
+    columns = np.arange(100)[None, :]
+    spanned = tf.within_table_columns(mask, footprint)  # the holes' columns keep the room
+    assert (spanned == (glass | holes | (room & (columns < 80 + tf.BEYOND_MARGIN)))).all()
+    kept = tf.within_table_columns(mask, footprint, feet=tf.FEET_SHARE)
+    assert (kept == (glass | holes | (room & (columns < 50 + tf.BEYOND_MARGIN)))).all()
+    assert int(kept.sum()) == 20 * 60 + 15 * 30 + 35 * tf.BEYOND_MARGIN
+    assert (tf.within_table_columns(glass, footprint, feet=tf.FEET_SHARE) == glass).all()
+
+
 def test_colour_departure_is_low_through_glass_and_high_on_an_opaque_colour():
     rgb, depth, plane = _table_frame((110, 80, 60))
     on_table = tf.on_table_readings(depth, K_TABLE, plane)[1]

@@ -110,6 +110,8 @@ SEE_THROUGH_WINDOW = 91  # pixels: the table's colour around a body is taken bey
 TABLE_LIKE = 1.5  # colour departure under which a pixel shows the table's colour
 BEYOND_MARGIN = 3  # pixels: an object's part beyond the table's far edge stays within this of
 # the columns its part over the table spans (within_table_columns)
+FEET_SHARE = 0.25  # share of its height over the table above its lowest row within which an
+# instance's columns reach down: its feet, the only columns it rises in beyond the table
 ON_AXIS_MARGIN = 0.005  # metres beyond a standing glass's fitted radius within which readings
 # above the table belong to it (a cap or lid is no wider than its body; reading noise)
 ON_AXIS_REACH = 0.4  # metres along a standing glass's axis searched for its opaque parts
@@ -715,12 +717,15 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
 
     joined = with_bodies(out, bodies, glass | ev.above, one_object)
     # an object stands on the table; a band of dropouts along the table's edge, where the
-    # table meets the room, is none: beyond the table or along its edge an instance keeps only
-    # the columns above its base, and one lying mostly along the edge is dropped
+    # table meets the room, is none: one lying mostly along the edge (with what lies beyond
+    # the table above its whole span) is dropped, and beyond the table or along its edge the
+    # others keep only the columns above their feet (the holes on the table beside a glass
+    # at the far edge join the room's above them)
     edge = along_table_edge(footprint, TABLE_EDGE_BAND)
     masks = [within_table_columns(c.mask, footprint & ~edge) for c in joined]
     keep = [i for i, m in enumerate(masks) if not m.any() or edge[m].mean() <= TABLE_EDGE_SHARE]
-    masks, joined = [masks[i] for i in keep], [joined[i] for i in keep]
+    masks = [within_table_columns(masks[i], footprint & ~edge, feet=FEET_SHARE) for i in keep]
+    joined = [joined[i] for i in keep]
     masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height) for m in masks]
     if ev.stereo:  # a stereo camera's holes and bumps beside a glass: within its outline
         own = own_pixels(departure, ev.height)
@@ -869,17 +874,25 @@ def own_pixels(departure: np.ndarray, height: np.ndarray) -> np.ndarray:
 
 
 def within_table_columns(mask: np.ndarray, footprint: np.ndarray,
-                         margin: int = BEYOND_MARGIN) -> np.ndarray:
+                         margin: int = BEYOND_MARGIN, feet: float | None = None) -> np.ndarray:
     """An instance ``(H, W) bool`` without what lies beyond the table's footprint ``(H, W)
-    bool`` outside the columns its part over the table spans (widened by ``margin`` pixels).
+    bool`` outside the columns its part over the table spans (widened by ``margin`` pixels);
+    with ``feet``, outside the columns where that part reaches down to within ``feet`` of its
+    height (in rows) of its lowest row.
 
     An object standing on the table may rise above the table's far edge in the image, but only
     straight above its own base: the rest beyond the table is the room (a wall's or the floor's
-    missing readings joined to the object's)."""
+    missing readings joined to the object's). The part over the table may hold more than the
+    object (the holes on the table beside it, up to the edge), whose columns end higher up than
+    the object's base does: ``feet`` keeps to the base's columns."""
     inside = mask & footprint
     if not inside.any() or inside.sum() == mask.sum():
         return mask
     columns = inside.any(axis=0)
+    if feet is not None:
+        rows = np.nonzero(inside.any(axis=1))[0]
+        lowest = inside.shape[0] - 1 - np.argmax(inside[::-1], axis=0)  # (W,) per column
+        columns &= lowest >= rows[-1] - feet * (rows[-1] - rows[0])
     columns = cv2.dilate(columns.astype(np.uint8)[None, :], np.ones((1, 2 * margin + 1), np.uint8)
                          )[0] > 0
     return joined_to(mask & (footprint | columns[None, :]), inside)
