@@ -251,6 +251,41 @@ def test_an_instance_is_cut_to_its_outlines_hull_keeping_its_own_colour_and_read
     assert (part == (glass | band)).all()
 
 
+def test_beyond_the_table_a_glass_stands_out_from_the_rooms_colour():
+    """A glass at the table's far edge rises against a white wall, its stereo shadow a band of
+    holes on the wall beside its top. Against the table's colour the wall departs, the
+    shadow too, and is kept as the glass's own; against the room's, only the glass's rim
+    does, and the shadow is cut with the outline's hull."""
+    rng = np.random.default_rng(0)
+    v, u = np.mgrid[0:100, 0:100]
+    footprint = v >= 40  # the table below row 40, the wall above
+    rgb = np.where(footprint[..., None], [60, 120, 160], [225, 225, 220]).astype(float)
+    rgb = np.clip(rgb + rng.normal(0, 2, rgb.shape), 0, 255).astype(np.uint8)
+    depth = np.where(footprint, 1.0, 2.0)
+    glass = (u >= 40) & (u < 60) & (v >= 25) & (v < 85)
+    rim = glass & ~(cv2.erode(glass.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)
+    rgb[rim] = (90, 90, 90)
+    # on the wall within the table colour's window (15 px), clear of the edge's blurred row
+    # and of the outline points along it (3 px)
+    shadow = (u >= 22) & (u < 40) & (v >= 28) & (v < 35)
+    depth[glass | shadow] = 0.0
+    on_table = footprint & (depth > 0)
+    departure = tf.table_colour_departure(rgb, on_table)
+    height = np.where(~footprint & (depth > 0), 0.3, 0.0)  # the wall stands over the table
+    plain = tf.within_outline_hull(glass | shadow, tf.outline_evidence(departure, on_table),
+                                   tf.own_pixels(departure, height))
+    assert (plain & shadow).sum() == shadow.sum()
+    seen = tf.beside_room(rgb, depth, footprint, departure)
+    assert (seen[footprint] == departure[footprint]).all()
+    assert np.nanmin(departure[shadow]) > tf.OUTLINE_COLOUR
+    clear = shadow & (u < 38)  # the rim's dark colour blurs into the next two columns
+    assert np.nanmax(seen[clear]) < tf.OUTLINE_COLOUR < np.nanmin(seen[rim & ~footprint])
+    cut = tf.within_outline_hull(glass | shadow, tf.outline_evidence(seen, on_table),
+                                 tf.own_pixels(seen, height))
+    assert not (cut & clear).any() and (cut & shadow).sum() <= 0.15 * shadow.sum()
+    assert (cut & glass).sum() >= 0.97 * glass.sum()
+
+
 def test_an_instance_beyond_the_table_keeps_only_the_columns_above_its_base():
     """A glass standing at the table's far edge rises above it in the image; the room's missing
     readings joined to it beyond the edge, to one side, are not the glass."""

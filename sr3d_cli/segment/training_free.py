@@ -728,8 +728,9 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     joined = [joined[i] for i in keep]
     masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height) for m in masks]
     if ev.stereo:  # a stereo camera's holes and bumps beside a glass: within its outline
-        own = own_pixels(departure, ev.height)
-        masks = [within_outline_hull(m, outline, own) for m in masks]
+        seen = beside_room(rgb, depth_m, footprint, departure)
+        masks = [within_outline_hull(m, outline_evidence(seen, on_table),
+                                     own_pixels(seen, ev.height)) for m in masks]
     return _without_overlaps([Candidate(m, c.score) for m, c in zip(masks, joined)])
 
 
@@ -863,6 +864,19 @@ def within_outline_hull(mask: np.ndarray, outline: np.ndarray, own: np.ndarray,
     inside = mask & (hull > 0)
     kept = joined_to(fill_holes(inside | (mask & own)) & mask, inside)
     return kept if kept.sum() >= HULL_LEAST * mask.sum() else mask
+
+
+def beside_room(rgb: np.ndarray, depth_m: np.ndarray, footprint: np.ndarray,
+                departure: np.ndarray) -> np.ndarray:
+    """The colour departure ``departure`` ``(H, W)`` (:func:`table_colour_departure`) over the
+    table's footprint ``(H, W) bool``, and beyond it the departure from the room's colour
+    around each pixel: the same measure with the room's readings (``depth_m`` ``(H, W)``
+    metres, valid beyond the footprint) in place of the table's. Beyond the table a glass
+    shows, and stands out from, the wall or the room behind it; against the table's colour
+    every pixel of a wall departs, its holes (a stereo camera's shadows of the glass on it)
+    too, and would count as a glass's outline."""
+    room = table_colour_departure(rgb, (depth_m > 0) & ~footprint)
+    return np.where(footprint, departure, room)
 
 
 def own_pixels(departure: np.ndarray, height: np.ndarray) -> np.ndarray:
