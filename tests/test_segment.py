@@ -808,10 +808,11 @@ def test_a_band_of_dropouts_along_the_tables_far_edge_is_no_object(monkeypatch):
 def test_a_glass_whose_top_meets_the_band_along_the_far_edge_keeps_only_its_columns(
         monkeypatch):
     """A glass whose top reaches the band of holes along the table's far edge: like beyond
-    the table, along its edge the instance keeps only the columns over its base (the parts of
-    the ragged band that dip more than TABLE_EDGE_BAND px into the table count as base too).
-    Measured: IoU with the glass 0.634, 955 of the 1534 band pixels beside the glass's columns
-    taken; with the band counted as table 0.538 and 1527."""
+    the table, along its edge the instance keeps only the columns over its feet (the parts of
+    the ragged band that dip more than TABLE_EDGE_BAND px into the table count as over the
+    table, but not as feet). Measured: IoU with the glass 0.780, 73 of the 1534 band pixels
+    beside the glass's columns taken; with the band counted as table 0.659 and 815 (the part
+    of the band beyond the footprint is still cut to the feet's columns)."""
     from sr3d_cli.segment import training_free
 
     scene = _far_edge_scene((30, 200), (110, 100, 25, 46))
@@ -825,7 +826,7 @@ def test_a_glass_whose_top_meets_the_band_along_the_far_edge_keeps_only_its_colu
         return (mask & glass).sum() / (mask | glass).sum(), (mask & beside).sum()
 
     iou, taken = measured()
-    assert iou > 0.6 and taken < 0.7 * beside.sum()
+    assert iou > 0.75 and taken < 0.1 * beside.sum()
     monkeypatch.setattr(training_free, "along_table_edge", lambda f, reach: np.zeros_like(f))
     iou_whole, taken_whole = measured()
-    assert iou_whole < iou - 0.07 and taken_whole > 0.95 * beside.sum()
+    assert iou_whole < iou - 0.07 and taken_whole > 0.5 * beside.sum()
