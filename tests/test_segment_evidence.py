@@ -284,6 +284,10 @@ def test_beyond_the_table_a_glass_stands_out_from_the_rooms_colour():
                                  tf.own_pixels(seen, height))
     assert not (cut & clear).any() and (cut & shadow).sum() <= 0.15 * shadow.sum()
     assert (cut & glass).sum() >= 0.97 * glass.sum()
+    # a room that reads nothing (out of range) gives no colour to compare with: the table's
+    unread = np.where(footprint, depth, 0.0)
+    assert np.array_equal(tf.beside_room(rgb, unread, footprint, departure), departure,
+                          equal_nan=True)
 
 
 def test_an_instance_beyond_the_table_keeps_only_the_columns_above_its_base():

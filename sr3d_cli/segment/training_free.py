@@ -871,12 +871,13 @@ def beside_room(rgb: np.ndarray, depth_m: np.ndarray, footprint: np.ndarray,
     """The colour departure ``departure`` ``(H, W)`` (:func:`table_colour_departure`) over the
     table's footprint ``(H, W) bool``, and beyond it the departure from the room's colour
     around each pixel: the same measure with the room's readings (``depth_m`` ``(H, W)``
-    metres, valid beyond the footprint) in place of the table's. Beyond the table a glass
-    shows, and stands out from, the wall or the room behind it; against the table's colour
-    every pixel of a wall departs, its holes (a stereo camera's shadows of the glass on it)
-    too, and would count as a glass's outline."""
+    metres, valid beyond the footprint) in place of the table's, where the room reads within
+    the window (a room out of the sensor's range gives nothing to compare: the table's
+    departure stays there). Beyond the table a glass shows, and stands out from, the wall or
+    the room behind it; against the table's colour every pixel of a wall departs, its holes (a
+    stereo camera's shadows of the glass on it) too, and would count as a glass's outline."""
     room = table_colour_departure(rgb, (depth_m > 0) & ~footprint)
-    return np.where(footprint, departure, room)
+    return np.where(footprint | np.isnan(room), departure, room)
 
 
 def own_pixels(departure: np.ndarray, height: np.ndarray) -> np.ndarray:
