@@ -15,11 +15,10 @@ Each frame's run is recorded in ``log/<frame>.json`` under the scene's output fo
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import json
-import multiprocessing
-import signal
 import time
 import traceback
 import zlib
@@ -31,6 +30,7 @@ from tqdm import tqdm
 
 from sr3d_cli.cli.batch import check_writable, iter_frames, open_scenes
 from sr3d_cli.cli.report import Report
+from sr3d_cli.cli.workers import Workers
 from sr3d_cli.config import Config
 from sr3d_cli.errors import Problem, Sr3dError
 from sr3d_cli.io.scene import Frame, SceneSource
@@ -40,15 +40,9 @@ log = logging.getLogger("sr3d")
 _JOB: dict = {}  # the forked workers inherit the work function and the frame list
 
 
-def _worker_init() -> None:
-    """In a worker: Ctrl-C is the parent's to handle; the parent's terminate() (SIGTERM) unwinds
-    the frame in progress, so its temporary file is removed."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, _stop_worker)
-
-
-def _stop_worker(signum, frame):
-    raise SystemExit(1)
+def _lost(index: int, why: str):
+    """The result of a frame whose worker process ended without sending one."""
+    return index, None, {}, f"no result: {why}", None, 0.0
 
 
 def _run_one(index: int):
@@ -208,40 +202,37 @@ def run_frames(name: str, scene: str, cfg: Config, out: str | None, frames: str 
         pairs = todo
     _JOB.update(pairs=pairs, work=work)
     bar = tqdm(total=len(pairs), desc=name, unit="frame", disable=ctx.meta["sr3d.quiet"])
-    pool = None
     try:
-        if workers > 1 and len(pairs) > 1:
-            pool = multiprocessing.get_context("fork").Pool(min(workers, len(pairs)),
-                                                            initializer=_worker_init)
-            results = pool.imap_unordered(_run_one, range(len(pairs)))
-        else:
-            results = map(_run_one, range(len(pairs)))
-        for index, problems, stages, failure, details, seconds in results:
-            source, frame_id = pairs[index]
-            key = source.frame_key(frame_id)
-            bar.update()
-            if failure is not None:
-                report.fail(key, failure, details=details)
-                record_run(source, frame_id, name, seconds, stages, report.failures[-1])
-                continue
-            record_run(source, frame_id, name, seconds, stages)
-            for problem in problems:
-                log.warning("warning: %s %s", key, problem)
-            report.ok()
-        if pool is not None:
-            pool.close()
-            pool.join()
-            pool = None
+        with contextlib.ExitStack() as stack:
+            if workers > 1 and len(pairs) > 1:
+                pool = stack.enter_context(Workers(min(workers, len(pairs)), _run_one, _lost))
+                results = pool.map(len(pairs))
+            else:
+                results = map(_run_one, range(len(pairs)))
+            _report_all(name, pairs, results, report, bar)
     except KeyboardInterrupt:
         report.interrupted = True
     finally:
-        if pool is not None:  # interrupted: stop the workers, their frames unwound
-            pool.terminate()
-            pool.join()
         bar.close()
     if after is not None and not report.interrupted:
         after(scenes)
     report.finish("frames")
+
+
+def _report_all(name: str, pairs: list, results, report: Report, bar: tqdm) -> None:
+    """Report and log each frame's result as it comes."""
+    for index, problems, stages, failure, details, seconds in results:
+        source, frame_id = pairs[index]
+        key = source.frame_key(frame_id)
+        bar.update()
+        if failure is not None:
+            report.fail(key, failure, details=details)
+            record_run(source, frame_id, name, seconds, stages, report.failures[-1])
+            continue
+        record_run(source, frame_id, name, seconds, stages)
+        for problem in problems:
+            log.warning("warning: %s %s", key, problem)
+        report.ok()
 
 
 def batch_options(func):
