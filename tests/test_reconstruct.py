@@ -83,6 +83,42 @@ def test_silhouette_rows_are_a_pixel_wider_than_the_covered_centres(r):
     assert (extra >= 0).all()
 
 
+def _whole_image_fill(centres, axis, radii, shape):
+    """Each frustum's hull filled straight into the whole image: what silhouette must equal."""
+    u = np.cross(axis, [1.0, 0, 0] if abs(axis[0]) < 0.9 else [0, 1.0, 0])
+    u /= np.linalg.norm(u)
+    v = np.cross(axis, u)
+    theta = np.linspace(0, 2 * np.pi, 32, endpoint=False)[:, None]
+    pts = centres[:, None] + radii[:, None, None] * (np.cos(theta) * u + np.sin(theta) * v)
+    z = pts[..., 2]
+    uv = pts[..., :2] / np.maximum(z, 1e-6)[..., None] * K[[0, 1], [0, 1]] + K[:2, 2]
+    fixed = np.rint(uv * 4).astype(np.int64).astype(np.int32)
+    out = np.zeros(shape, np.uint8)
+    front = (z > 0.01).all(axis=1)
+    for k in range(len(centres) - 1):
+        if front[k] and front[k + 1]:
+            ring = np.concatenate([fixed[k], fixed[k + 1]])
+            cv2.fillConvexPoly(out, cv2.convexHull(ring), 1, cv2.LINE_8, 2)
+    return out > 0
+
+
+def test_a_silhouette_drawn_in_its_box_or_a_window_is_the_whole_images():
+    rng = np.random.default_rng(5)
+    shape = (480, 640)
+    for _ in range(60):  # solids inside, across the image's edges, partly behind the camera
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        base = np.array([rng.uniform(-0.6, 0.6), rng.uniform(-0.4, 0.4), rng.uniform(0.0, 1.0)])
+        centres = base + np.linspace(0, rng.uniform(0.03, 0.4), 30)[:, None] * axis
+        radii = rng.uniform(0.002, 0.08, 30)
+        whole = _whole_image_fill(centres, axis, radii, shape)
+        assert np.array_equal(silhouette(centres, axis, radii, K, shape), whole)
+        w, h = int(rng.integers(1, 300)), int(rng.integers(1, 300))
+        x, y = int(rng.integers(0, shape[1] - w + 1)), int(rng.integers(0, shape[0] - h + 1))
+        assert np.array_equal(silhouette(centres, axis, radii, K, shape, (x, y, w, h)),
+                              whole[y:y + h, x:x + w])
+
+
 def test_a_revolved_profile_has_outward_normals_whichever_way_it_runs():
     """revolve orients the faces by the sign of the volume: a profile listed base to top or
     top to base, closed or an open vessel's, gives a positive volume near the solid's."""

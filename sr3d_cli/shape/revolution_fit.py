@@ -134,8 +134,8 @@ class _Frame:
 
     def draw(self, model: "_Model", K: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         """The model's silhouette in the image ``shape``, as seen in this window."""
-        sil = silhouette(model.centres(), model.axis, model.radii, K, shape)
-        return self.warp(sil[self.y0:self.y0 + self.shape[0], self.x0:self.x0 + self.shape[1]])
+        window = (self.x0, self.y0, self.shape[1], self.shape[0])
+        return self.warp(silhouette(model.centres(), model.axis, model.radii, K, shape, window))
 
     def point(self, uv: np.ndarray) -> np.ndarray:
         """Image pixel(s) (n, 2) to rotated-window coordinates (n, 2)."""
