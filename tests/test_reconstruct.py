@@ -92,7 +92,7 @@ def _whole_image_fill(centres, axis, radii, shape):
     pts = centres[:, None] + radii[:, None, None] * (np.cos(theta) * u + np.sin(theta) * v)
     z = pts[..., 2]
     uv = pts[..., :2] / np.maximum(z, 1e-6)[..., None] * K[[0, 1], [0, 1]] + K[:2, 2]
-    fixed = np.rint(uv * 4).astype(np.int64).astype(np.int32)
+    fixed = np.rint(uv * 4).astype(np.int32)
     out = np.zeros(shape, np.uint8)
     front = (z > 0.01).all(axis=1)
     for k in range(len(centres) - 1):

@@ -106,10 +106,10 @@ class Workers:
 
     def close(self) -> None:
         """End idle workers and wait for them."""
-        for conn, proc in self._procs.items():
+        for conn in self._procs:
             try:
                 conn.send(None)
-            except OSError:
+            except OSError:  # a worker that died while idle
                 pass
         for conn, proc in self._procs.items():
             proc.join()
