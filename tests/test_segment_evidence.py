@@ -426,18 +426,44 @@ def test_instances_preview_labels_each_instance_with_its_score():
     assert (picture[:120][ids == 0] == 100).mean() > 0.8
 
 
+def test_a_body_that_hides_the_table_joins_only_the_instance_holding_half_of_it():
+    """with_bodies: a body read smoothly that does not show the table (a thick plastic's lower
+    part) joins the instance that holds half of it or more; one held by less, or by none, is
+    left out; a body that shows the table is a new instance even alone."""
+    shape = (120, 160)
+    top = np.zeros(shape, bool)
+    top[20:60, 40:80] = True  # an instance found by its holes: a glass's upper part
+    lower = np.zeros(shape, bool)
+    lower[30:80, 45:75] = True  # its lower part's readings: 30 of 50 rows inside the instance
+    beside = np.zeros(shape, bool)
+    beside[30:70, 75:135] = True  # an opaque object: 5 of its 60 columns inside
+    alone = np.zeros(shape, bool)
+    alone[95:115, 100:150] = True
+
+    def masks(bodies):
+        found = tf.with_bodies([tf.Candidate(top, 0.9)], bodies, np.ones(shape, bool),
+                               lambda mask: True)
+        return [c.mask for c in found]
+
+    low = np.zeros(shape, bool)
+    low[40:90, 45:75] = True  # 20 of 50 rows inside: held by less than half
+    assert np.array_equal(masks([(lower, False)])[0], top | lower)
+    assert len(masks([(lower, False)])) == 1
+    assert [m.sum() for m in masks([(low, False)])] == [top.sum()]
+    assert np.array_equal(masks([(low, True)])[0], top | low)
+    assert [m.sum() for m in masks([(beside, False), (alone, False)])] == [top.sum()]
+    found = masks([(alone, True)])
+    assert len(found) == 2 and np.array_equal(found[1], alone)
+
+
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.637, 13 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
-    < 0.2 with every object) 0.36 per frame; not cut to the outline's hull
-    (``within_outline_hull``) 0.573, 10 and 0.36; with the table's bumps kept in the standing
-    bodies too (no ``over_feet``) 0.530, 9 and 0.36; without the stereo shadows and the table's
-    edge band too (``stereo_baseline`` 0, no ``along_table_edge``) 0.485, 8 and 0.64; without
-    the standing bodies (BODY_SEES_TABLE out of reach) 0.23, none and 0.91. The 8 views of the
-    capped container: mean IoU 0.781 (0.715 not cut to the hull, 0.645 with the bumps, 0.619
-    without the shadows and the edge band either, 0.589 without its lid's readings joined
-    either, ``with_parts_on_axis``)."""
+    per true object mean 0.692, 14 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
+    < 0.2 with every object) 0.27 per frame; without the bodies that hide the table joined to
+    the instance holding half of them (``BODY_JOINED`` out of reach: ClearGrasp 123's holders
+    0.84 and 0.85 drop to 0.66 and 0.59) 0.665, 14 and 0.27. The 8 views of the capped
+    container: mean IoU 0.783."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
@@ -456,9 +482,9 @@ def test_measured_on_the_shared_real_frames(realdata):
                          if iou < 0.2 and (inst.ids == k).sum() >= 300)
             frames += 1
     assert frames == 11 and len(best) == 16
-    assert false / frames <= 0.5
-    assert np.mean(best) >= 0.62 and sum(v >= 0.5 for v in best) >= 12  # two at 0.54
-    assert len(container) == 8 and np.mean(container) >= 0.76
+    assert false / frames <= 0.3
+    assert np.mean(best) >= 0.68 and sum(v >= 0.5 for v in best) >= 14  # one at 0.50
+    assert len(container) == 8 and np.mean(container) >= 0.77
 
 
 def test_fill_holes_in_the_box_fills_what_scipy_fills():

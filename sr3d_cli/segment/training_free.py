@@ -105,6 +105,9 @@ BODY_SEES_TABLE = 0.15  # least share of a body's pixels that show the table's c
 BODY_HOLES = 0.05  # least share of a body's pixels without a reading: a sensor fails somewhere
 # on every glass; an opaque object's readings are dense (its dropouts run along its edge)
 BODY_INSIDE = 0.8  # share of a body inside one instance that makes it a part of that instance
+BODY_JOINED = 0.5  # share of a body that does not show the table one instance must hold for the
+# body to join it: the glass's lower part, read smoothly (ClearGrasp 123's holders: 0.56 and 0.66
+# held, each 87-89% the holder's; an earphone case beside a false instance: 0.20)
 BODY_SHARED = 0.1  # share of a body each of two instances holding it makes it touching objects
 SEE_THROUGH_WINDOW = 91  # pixels: the table's colour around a body is taken beyond its width
 TABLE_LIKE = 1.5  # colour departure under which a pixel shows the table's colour
@@ -485,8 +488,12 @@ def over_feet(readings: np.ndarray, seeds: np.ndarray, depth_m: np.ndarray, K: n
 
 
 def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.ndarray,
-                    plane: Plane, *, min_area: int, close_radius: int) -> list[np.ndarray]:
-    """Glass objects found by their readings over the table ``(H, W) bool`` each.
+                    plane: Plane, *, min_area: int, close_radius: int
+                    ) -> list[tuple[np.ndarray, bool]]:
+    """Glass objects found by their readings over the table: ``(mask, sees_table)`` each,
+    mask ``(H, W) bool``; ``sees_table`` is False for a body that passes every test but the
+    see-through one (:func:`with_bodies` joins such a body only to an instance that already
+    holds :data:`BODY_JOINED` of it).
 
     A real stereo camera often reads a glass's front surface smoothly, so a standing glass
     looks like an opaque object by its depth alone; what gives it away is that it shows the
@@ -527,29 +534,35 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.nd
             continue
         known = departure[mask]
         known = known[np.isfinite(known)]
-        if known.size and np.mean(known < TABLE_LIKE) >= BODY_SEES_TABLE:
-            kept = mask & own
-            out.append(kept if kept.sum() >= min_area else mask)
+        kept = mask & own
+        out.append((kept if kept.sum() >= min_area else mask,
+                    bool(known.size and np.mean(known < TABLE_LIKE) >= BODY_SEES_TABLE)))
     return out
 
 
-def with_bodies(found: list[Candidate], bodies: list[np.ndarray], evidence: np.ndarray,
-                one_object) -> list[Candidate]:
+def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
+                evidence: np.ndarray, one_object) -> list[Candidate]:
     """Candidates with the :func:`standing_bodies` joined in.
 
-    A body overlapping no candidate is a new one, scored by its share of ``evidence``
-    ``(H, W) bool`` (glass evidence or readings above the table). A body mostly inside one
-    candidate (:data:`BODY_INSIDE`) is a part of it and adds nothing. A body that one
-    candidate overlaps less is joined to it: that candidate's glass evidence covered only the
-    part of the object the sensor failed on, unless the join is no longer ``one_object``
-    (a callable on an ``(H, W) bool`` mask: :func:`splits` finds no cut). A body
-    that two candidates share (:data:`BODY_SHARED` of it each) is touching objects the
-    candidates have already parted, and adds nothing.
+    A body that does not show the table counts only where one candidate holds
+    :data:`BODY_JOINED` of it: a glass whose top the sensor failed on (a candidate by its
+    holes) and whose lower part it read smoothly, the table's colour there hidden by the
+    walls and edges of a thick plastic; alone, or mostly beside a candidate, such a body is
+    an opaque object. A body overlapping no candidate is a new one, scored by its share of
+    ``evidence`` ``(H, W) bool`` (glass evidence or readings above the table). A body mostly
+    inside one candidate (:data:`BODY_INSIDE`) is a part of it and adds nothing. A body that
+    one candidate overlaps less is joined to it: that candidate's glass evidence covered only
+    the part of the object the sensor failed on, unless the join is no longer ``one_object``
+    (a callable on an ``(H, W) bool`` mask: :func:`splits` finds no cut). A body that two
+    candidates share (:data:`BODY_SHARED` of it each) is touching objects the candidates have
+    already parted, and adds nothing.
     """
     out = list(found)
-    for body in bodies:
+    for body, sees_table in bodies:
         area = int(body.sum())
         overlap = np.array([int((c.mask & body).sum()) for c in out])
+        if not sees_table and (not overlap.size or overlap.max() < BODY_JOINED * area):
+            continue
         if not overlap.size or overlap.max() == 0:
             out.append(Candidate(body, float(evidence[body].mean())))
             continue
