@@ -702,6 +702,8 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
         return looks_opaque(mask, departure)
 
     for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
+        if region.sum() < least:  # no part of it could be kept: judging its cuts spends fits
+            continue
         # a region or part opaque by its colour as a whole is not split (the revolution fits
         # are most of segment's time), only dropped: on the shared real, extsim and generated
         # frames no part of one is ever kept, and a glass whose colour departs from the
