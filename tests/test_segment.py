@@ -481,6 +481,38 @@ def test_a_lying_bottle_split_at_a_dent_is_rejoined_but_touching_objects_are_not
     assert len(rejoined(pair, K, plane, np.zeros_like(depth), ids > 0)) == 1
 
 
+def test_the_pieces_of_a_lying_bottle_are_joined_but_two_lying_glasses_are_not():
+    """A lying bottle (22 cm, 227 px long) whose middle gave no evidence, in two pieces 12 or
+    20 px apart along its axis: each piece fits lying (IoU .96-.97) and the convex hull of both
+    fits lying at least as well, so :func:`lying_pieces_joined` makes them one (IoU .93 with
+    the bottle: the hull covers the table beside its neck). Pieces 40 px apart lie beyond the
+    reach (25 px); two lying glasses side by side (6 or 8 cm apart) draw worse as one and stay
+    apart."""
+    from sr3d_cli.segment.training_free import Candidate, lying_pieces_joined
+
+    bottle = [[0, 0], [0.035, 0], [0.035, 0.14], [0.012, 0.18], [0.012, 0.22], [0, 0.22]]
+    ids, K, plane, depth = solids_on_table([(bottle, 0.22, -0.05, 0.0, 20.0)])
+    ys, xs = np.nonzero(ids > 0)
+    pixels = np.column_stack([xs, ys])
+    centre = pixels.mean(0)
+    along = (pixels - centre) @ np.linalg.svd(pixels - centre, full_matrices=False)[2][0]
+    for gap, joined in ((12, True), (20, True), (40, False)):
+        pieces = []
+        for keep in (along < -gap / 2, along > gap / 2):
+            piece = np.zeros(ids.shape, bool)
+            piece[ys[keep], xs[keep]] = True
+            pieces.append(Candidate(piece, 1.0))
+        out = lying_pieces_joined(pieces, K, plane, depth, ids > 0)
+        assert len(out) == (1 if joined else 2)
+        if joined:
+            assert instance_ious(out[0].mask.astype(np.int32), ids)[1] > 0.9
+    for apart in (0.06, 0.08):
+        ids, K, plane, depth = solids_on_table([(GLASS, 0.1, -0.05, 0.0, 0.0),
+                                                (GLASS, 0.1, -0.05, apart, 0.0)])
+        pair = [Candidate(ids == k, 1.0) for k in (1, 2)]
+        assert len(lying_pieces_joined(pair, K, plane, depth, ids > 0)) == 2
+
+
 @pytest.mark.slow
 def test_a_standing_bottle_a_lying_one_leans_on_is_split_from_it(tmp_path):
     """Generated frame (seed 7100, frame 5, drawn by GL where there is one; the numpy
