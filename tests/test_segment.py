@@ -444,7 +444,8 @@ def test_a_lying_bottle_split_at_a_dent_is_rejoined_but_touching_objects_are_not
     """A lying bottle whose evidence has a deep dent on one side (where its glass read the
     table) is cut there by :func:`split_touching`: two short solids draw the dented region
     better than one. Grown over the dent (each pixel to the nearest part), one solid draws
-    the union better than the two and :func:`rejoined` joins them. Two touching glasses stay
+    the union better than the two and :func:`rejoined` joins them (asked for parts that both
+    stand, as a standing body's split is, it is not cut). Two touching glasses stay
     apart; so do a beaker and a flask behind it whose union one solid draws well (.97 against
     .97 / .89), because their readings stand around two axes; without readings they join."""
     from scipy import ndimage
@@ -462,6 +463,7 @@ def test_a_lying_bottle_split_at_a_dent_is_rejoined_but_touching_objects_are_not
     cv2.circle(dent, tuple(int(v) for v in centre + half * across), int(0.9 * half), 1, -1)
     parts = split_touching(whole & (dent == 0), K, plane)
     assert len(parts) == 2
+    assert len(split_touching(whole & (dent == 0), K, plane, standing=True)) == 1  # parts lie
     labels = np.argmax(np.stack([np.zeros_like(whole)] + parts), 0)
     _, (iy, ix) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
     grown = labels[iy, ix] * whole

@@ -547,15 +547,21 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.nd
 
 
 def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
-                evidence: np.ndarray, one_object) -> list[Candidate]:
+                evidence: np.ndarray, one_object, parted) -> list[Candidate]:
     """Candidates with the :func:`standing_bodies` joined in.
 
     A body that does not show the table counts only where one candidate holds
     :data:`BODY_JOINED` of it: a glass whose top the sensor failed on (a candidate by its
     holes) and whose lower part it read smoothly, the table's colour there hidden by the
     walls and edges of a thick plastic; alone, or mostly beside a candidate, such a body is
-    an opaque object. A body overlapping no candidate is a new one, scored by its share of
-    ``evidence`` ``(H, W) bool`` (glass evidence or readings above the table). A body mostly
+    an opaque object. A body overlapping no candidate is new: it is cut by ``parted`` (a
+    callable from an ``(H, W) bool`` mask to its parts: :func:`split_touching` with parts
+    that both stand), each part a candidate scored by its share of ``evidence`` ``(H, W)
+    bool`` (glass evidence or readings above the table). Two glasses a few millimetres apart
+    that the sensor reads smoothly close into one body; a container whose readings are
+    pinched where its glass fails across its middle cuts into parts that fit only lying (the
+    shared Tracebot views copied beside themselves 100 px apart: one of them), so a body's
+    cut holds only where both parts stand. A body mostly
     inside one candidate (:data:`BODY_INSIDE`) is a part of it and adds nothing. A body that
     one candidate overlaps less is joined to it: that candidate's glass evidence covered only
     the part of the object the sensor failed on, unless the join is no longer ``one_object``
@@ -570,7 +576,7 @@ def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
         if not sees_table and (not overlap.size or overlap.max() < BODY_JOINED * area):
             continue
         if not overlap.size or overlap.max() == 0:
-            out.append(Candidate(body, float(evidence[body].mean())))
+            out += [Candidate(part, float(evidence[part].mean())) for part in parted(body)]
             continue
         if (overlap >= BODY_SHARED * area).sum() > 1:
             continue
@@ -736,7 +742,11 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
         return not splits(mask, K, plane, depth=depth_m, glass=glass,
                           close_radius=close_radius, min_area=min_area)
 
-    joined = with_bodies(out, bodies, glass | ev.above, one_object)
+    def parted(mask: np.ndarray) -> list[np.ndarray]:
+        return split_touching(mask, K, plane, depth=depth_m, glass=glass,
+                              close_radius=close_radius, min_area=min_area, standing=True)
+
+    joined = with_bodies(out, bodies, glass | ev.above, one_object, parted)
     # an object stands on the table; a band of dropouts along the table's edge, where the
     # table meets the room, is none: one lying mostly along the edge (with what lies beyond
     # the table above its whole span) is dropped, and beyond the table or along its edge the
@@ -1457,7 +1467,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
                    depth: np.ndarray | None = None, glass: np.ndarray | None = None,
                    close_radius: int = 6, max_pieces: int = SPLIT_PIECES,
                    gain: float = SPLIT_GAIN, min_share: float = SPLIT_SHARE, min_area: int = 150,
-                   whole=None, rounds: int = 2, opaque=None) -> list[np.ndarray]:
+                   whole=None, rounds: int = 2, opaque=None,
+                   standing: bool = False) -> list[np.ndarray]:
     """Split a region made of touching objects where solids of revolution on the table explain
     the parts clearly better than one explains the whole.
 
@@ -1504,6 +1515,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     levels deep (``whole``: the region's fit, given with each part of a region already cut).
     A region or part for which ``opaque(mask)`` holds (a predicate on an (H, W) bool mask) is
     not split: an opaque object's parts are all dropped, and judging them only spends fits.
+    With ``standing``, only cuts whose parts both fit standing hold (see :func:`with_bodies`).
     Where one part stands in front of the other (:func:`~sr3d_cli.geometry.occlusion.in_front`),
     the part behind is fitted with the front part's pixels as hidden, so that it may reach down
     behind it (:func:`~sr3d_cli.shape.revolution_fit.fit_revolution`'s ``occluders``),
@@ -1517,6 +1529,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     best = None  # (key, parts with their fits)
     for key, parts in _held_cuts(region, K, plane, depth, glass, close_radius, max_pieces,
                                  gain, min_share, min_area, whole):
+        if standing and not all(f is not None and f.resting == "standing" for _, f in parts):
+            continue
         if best is None or key > best[0]:
             best = (key, parts)
     if best is None:
@@ -1525,7 +1539,8 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
             for part in split_touching(mask, K, plane, depth=depth, glass=glass,
                                        close_radius=close_radius, max_pieces=max_pieces,
                                        gain=gain, min_share=min_share, min_area=min_area,
-                                       whole=own, rounds=rounds - 1, opaque=opaque)]
+                                       whole=own, rounds=rounds - 1, opaque=opaque,
+                                       standing=standing)]
 
 
 def splits(region: np.ndarray, K: np.ndarray, plane: Plane, *, depth: np.ndarray | None = None,
