@@ -107,7 +107,7 @@ BODY_HOLES = 0.05  # least share of a body's pixels without a reading: a sensor 
 BODY_INSIDE = 0.8  # share of a body inside one instance that makes it a part of that instance
 BODY_JOINED = 0.5  # share of a body that does not show the table one instance must hold for the
 # body to join it: the glass's lower part, read smoothly (ClearGrasp 123's holders: 0.56 and 0.66
-# held, each 87-89% the holder's; an earphone case beside a false instance: 0.20)
+# held, 87-89% of each body inside its holder; an earphone case beside a false instance: 0.20)
 BODY_SHARED = 0.1  # share of a body each of two instances holding it makes it touching objects
 SEE_THROUGH_WINDOW = 91  # pixels: the table's colour around a body is taken beyond its width
 TABLE_LIKE = 1.5  # colour departure under which a pixel shows the table's colour
@@ -561,13 +561,13 @@ def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
     that the sensor reads smoothly close into one body; a container whose readings are
     pinched where its glass fails across its middle cuts into parts that fit only lying (the
     shared Tracebot views copied beside themselves 100 px apart: one of them), so a body's
-    cut holds only where both parts stand. A body mostly
-    inside one candidate (:data:`BODY_INSIDE`) is a part of it and adds nothing. A body that
-    one candidate overlaps less is joined to it: that candidate's glass evidence covered only
-    the part of the object the sensor failed on, unless the join is no longer ``one_object``
-    (a callable on an ``(H, W) bool`` mask: :func:`splits` finds no cut). A body that two
-    candidates share (:data:`BODY_SHARED` of it each) is touching objects the candidates have
-    already parted, and adds nothing.
+    cut holds only where both parts stand. A body mostly inside one candidate
+    (:data:`BODY_INSIDE`) is a part of it and adds nothing. A body that one candidate overlaps
+    less is joined to it: that candidate's glass evidence covered only the part of the object
+    the sensor failed on, unless the join is no longer ``one_object`` (a callable on an
+    ``(H, W) bool`` mask: :func:`splits` finds no cut). A body that two candidates share
+    (:data:`BODY_SHARED` of it each) is touching objects the candidates have already parted,
+    and adds nothing.
     """
     out = list(found)
     for body, sees_table in bodies:
@@ -785,8 +785,8 @@ def lying_pieces_joined(found: list[Candidate], K: np.ndarray, plane: Plane,
     fits = _PartFits(K, plane, depth_m)
 
     def lying(mask: np.ndarray):
-        found = fits(mask)
-        return found if found is not None and found.resting == "lying" else None
+        fit = fits(mask)
+        return fit if fit is not None and fit.resting == "lying" else None
 
     out = list(found)
     while True:
