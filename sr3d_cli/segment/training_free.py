@@ -802,8 +802,10 @@ def lying_pieces_joined(found: list[Candidate], K: np.ndarray, plane: Plane,
             fa, fb = lying(a), lying(b)
             if fa is None or fb is None:
                 continue
-            others = [c.mask for k, c in enumerate(out) if k not in (i, j)]
-            hull = convex_hull(a | b) & ~np.any(others, axis=0) if others else convex_hull(a | b)
+            hull = convex_hull(a | b)
+            for k, c in enumerate(out):
+                if k not in (i, j):
+                    hull &= ~c.mask
             whole = lying(hull)
             na, nb = int(a.sum()), int(b.sum())
             if whole is not None and whole.iou >= (fa.iou * na + fb.iou * nb) / (na + nb):
