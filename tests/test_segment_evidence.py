@@ -531,3 +531,46 @@ def test_fill_holes_in_the_box_fills_what_scipy_fills():
         with_holes += int(filled.sum() > (mask > 0).sum())
     assert with_holes > 10
     assert not fill_holes(np.zeros((4, 4), bool)).any()
+
+
+def test_convex_hull_from_each_rows_ends_is_the_hull_of_every_pixel():
+    """convex_hull takes each row's end pixels only: the same pixels as cv2's hull of every set
+    pixel, for random blobs and scattered pixels, bool or uint8; none for an empty mask."""
+    from sr3d_cli.geometry.camera import convex_hull
+
+    rng = np.random.default_rng(1)
+    for k in range(80):
+        h, w = rng.integers(1, 70, 2)
+        if k % 2:
+            mask = rng.random((h, w)) < rng.uniform(0.001, 0.2)
+        else:
+            mask = cv2.GaussianBlur(rng.random((h, w)), (0, 0), rng.uniform(0.5, 4)) > 0.6
+        ys, xs = np.nonzero(mask)
+        every = np.zeros((h, w), np.uint8)
+        if len(xs):
+            cv2.fillConvexPoly(every, cv2.convexHull(np.column_stack([xs, ys]).astype(np.int32)), 1)
+        given = mask.astype(np.uint8) * 3 if k % 3 == 0 else mask
+        assert np.array_equal(convex_hull(given), every > 0)
+    ring = np.zeros((40, 40), bool)
+    cv2.circle(ring.view(np.uint8), (20, 20), 12, 1, 2)
+    assert convex_hull(ring)[20, 20] and not ring[20, 20]
+    assert not convex_hull(np.zeros((5, 5), bool)).any()
+
+
+def test_opaque_objects_are_the_parts_whose_median_departure_is_high():
+    """A part of opaque evidence is an opaque object when the median colour departure over its
+    pixels with a known departure is above OPAQUE_COLOUR (of an even count: the mean of the two
+    middle values); a part with no known departure is not."""
+    opaque = np.zeros((20, 30), bool)
+    opaque[2:6, 2:6] = opaque[2:6, 10:14] = opaque[10:14, 2:6] = opaque[10:14, 20:24] = True
+    departure = np.full(opaque.shape, np.nan)
+    level = tf.OPAQUE_COLOUR
+    departure[2:6, 2:6] = level + 1  # every pixel departs
+    departure[2:4, 10:14], departure[4:6, 10:14] = level + 0.5, level - 1  # middle two: -0.25
+    departure[10:12, 22:24], departure[12:14, 22:24] = level - 1, level + 3  # half known: +1
+    out = tf.opaque_objects(opaque, departure)
+    assert out[2:6, 2:6].all()
+    assert not out[2:6, 10:14].any()  # the upper middle value alone would call it opaque
+    assert not out[10:14, 2:6].any()  # no known departure
+    assert out[10:14, 20:24].all()  # the unknown half does not count
+    assert not out[~opaque].any()

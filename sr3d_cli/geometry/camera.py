@@ -84,6 +84,24 @@ def mask_window(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
             slice(max(x - margin, 0), min(x + w + margin, mask.shape[1])))
 
 
+def convex_hull(mask: np.ndarray) -> np.ndarray:
+    """``(H, W) bool``: the convex hull of the set pixels of ``mask`` ``(H, W)`` bool (all
+    False where none is set), filled by cv2. The hull of each row's two end pixels is the hull
+    of them all: a frame-sized table patch gives 2 H points, not every pixel."""
+    out = np.zeros(mask.shape, np.uint8)
+    box = mask_window(mask, 0)
+    if box is None:
+        return out > 0
+    sub = np.asarray(mask[box], dtype=bool)
+    rows = np.flatnonzero(sub.any(axis=1))
+    left = sub[rows].argmax(axis=1)
+    right = sub.shape[1] - 1 - sub[rows, ::-1].argmax(axis=1)
+    pts = np.column_stack([np.concatenate([left, right]) + box[1].start,
+                           np.tile(rows, 2) + box[0].start]).astype(np.int32)
+    cv2.fillConvexPoly(out, cv2.convexHull(pts), 1)
+    return out > 0
+
+
 def window_K(K: np.ndarray, x0: int, y0: int) -> np.ndarray:
     """Intrinsics ``(3, 3)`` of the image window whose top-left pixel is ``(x0, y0)``."""
     out = np.array(K, dtype=np.float64)

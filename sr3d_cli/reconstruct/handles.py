@@ -22,7 +22,7 @@ import numpy as np
 import trimesh
 from skimage.measure import marching_cubes
 
-from sr3d_cli.geometry.camera import mask_window, window_K
+from sr3d_cli.geometry.camera import convex_hull, mask_window, window_K
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import apply_T
 
@@ -63,8 +63,7 @@ def _split_in(mask: np.ndarray, K: np.ndarray, plane: Plane) -> tuple[np.ndarray
     if not kept.any():
         return mask, none
     ys, xs = np.nonzero(kept)
-    hull = np.zeros_like(m8)
-    cv2.fillConvexPoly(hull, cv2.convexHull(np.column_stack([xs, ys]).astype(np.int32)), 1)
+    hull = convex_hull(kept)
     centre = np.array([xs.mean(), ys.mean()])
     down = plane.down_at(centre, K)
     across = np.array([-down[1], down[0]])

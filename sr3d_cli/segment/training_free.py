@@ -45,7 +45,8 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from sr3d_cli.geometry.camera import depth_to_points, mask_window, unproject, window_K
+from sr3d_cli.geometry.camera import (convex_hull, depth_to_points, mask_window, unproject,
+                                      window_K)
 from sr3d_cli.geometry.occlusion import down_direction, in_front
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, DEPTH_SAMPLES,
@@ -147,16 +148,6 @@ def fill_holes(mask: np.ndarray) -> np.ndarray:
     if box is not None:
         out[box] = ndimage.binary_fill_holes(mask[box])
     return out
-
-
-def convex_hull(mask: np.ndarray) -> np.ndarray:
-    """``(H, W) bool``: the convex hull of the set pixels of ``mask`` ``(H, W)`` (all False
-    where none is set)."""
-    ys, xs = np.nonzero(mask)
-    out = np.zeros(mask.shape, np.uint8)
-    if len(xs):
-        cv2.fillConvexPoly(out, cv2.convexHull(np.column_stack([xs, ys]).astype(np.int32)), 1)
-    return out > 0
 
 
 def _closed(mask: np.ndarray, radius: int) -> np.ndarray:
@@ -319,9 +310,18 @@ def opaque_objects(opaque: np.ndarray, departure: np.ndarray) -> np.ndarray:
     count, labels = cv2.connectedComponents(opaque.astype(np.uint8), connectivity=8)
     if count < 2:
         return np.zeros(opaque.shape, bool)
-    known = np.where(np.isfinite(departure), labels, 0)  # a component with none: median NaN
-    median = ndimage.median(np.nan_to_num(departure), known, np.arange(1, count))
-    keep = np.concatenate([[False], np.asarray(median) > OPAQUE_COLOUR])
+    # each component's median over its pixels with a known departure (sorted by component,
+    # then value; a frame's other pixels are never sorted); a component with none is not opaque
+    known = (labels > 0) & np.isfinite(departure)
+    value, label = departure[known], labels[known]
+    order = np.lexsort((value, label))
+    value, label = value[order], label[order]
+    first = np.searchsorted(label, np.arange(1, count))
+    size = np.searchsorted(label, np.arange(1, count), side="right") - first
+    low = value[np.minimum(first + (size - 1) // 2, len(value) - 1)] if len(value) else 0.0
+    high = value[np.minimum(first + size // 2, len(value) - 1)] if len(value) else 0.0
+    median = np.where(size > 0, (low + high) / 2, 0.0)
+    keep = np.concatenate([[False], median > OPAQUE_COLOUR])
     return keep[labels]
 
 
