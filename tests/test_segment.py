@@ -394,7 +394,7 @@ def test_one_object_behind_another_is_split_where_their_readings_stand(back):
     parts = split_touching(region, K, plane, depth=sparse)
     assert len(parts) == 2
     ious = instance_ious(np.argmax(np.stack([np.zeros_like(region)] + parts), 0), ids)
-    assert min(ious.values()) > 0.85
+    assert min(ious.values()) > 0.8
 
 
 @pytest.mark.parametrize("behind, aside", [(0.07, 0.0), (0.06, 0.04), (0.08, 0.02),
@@ -864,3 +864,26 @@ def test_a_glass_whose_top_meets_the_band_along_the_far_edge_keeps_only_its_colu
     monkeypatch.setattr(training_free, "along_table_edge", lambda f, reach: np.zeros_like(f))
     iou_whole, taken_whole = measured()
     assert iou_whole < iou - 0.07 and taken_whole > 0.5 * beside.sum()
+
+
+def test_a_few_stray_readings_do_not_take_a_footprint_group_of_their_own():
+    """Two readings far off (a glass's readings scatter along the ray) among many on a beaker
+    straight behind a flask: the 2-means on the readings' feet still parts the two objects,
+    each part drawing its own object (IoU over .8), not a sliver around the strays."""
+    from sr3d_cli.segment.training_free import FOOTPRINT_APART, _footprint_cut
+
+    flask = [[0, 0], [0.045, 0], [0.047, 0.01], [0.04, 0.06], [0.012, 0.1], [0.012, 0.13],
+             [0, 0.13]]
+    beaker = [[0, 0], [0.04, 0], [0.04, 0.09], [0, 0.09]]
+    ids, K, plane, depth = solids_on_table([(flask, 0.13, 0.0, -0.03), (beaker, 0.09, 0.0, 0.1)])
+    hull = np.zeros(ids.shape, np.uint8)
+    cv2.fillConvexPoly(hull, cv2.convexHull(cv2.findNonZero((ids > 0).astype(np.uint8))), 1)
+    region = hull > 0
+    ys, xs = np.nonzero(region & (ids > 0))
+    keep = np.random.default_rng(0).random(len(xs)) < 0.3
+    xs, ys = xs[keep], ys[keep]
+    raw = depth[ys, xs].copy()
+    raw[:2] *= 1.5  # two stray readings, far beyond the surfaces
+    a, b = _footprint_cut(region, xs, ys, raw, K, plane, FOOTPRINT_APART, 150)
+    ious = instance_ious(np.where(a, 1, np.where(b, 2, 0)), ids)
+    assert min(ious.values()) > 0.8
