@@ -482,8 +482,11 @@ def test_a_body_that_hides_the_table_joins_only_the_instance_holding_half_of_it(
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.731, 15 of 16 objects at IoU >= 0.5, false instances (>= 300 px, IoU
-    < 0.2 with every object) 0.09 per frame; without the pieces of a lying object joined
+    per true object mean 0.750, 16 of 16 objects at IoU >= 0.5 (two at 0.50 and 0.53), false
+    instances (>= 300 px, IoU < 0.2 with every object) 0.09 per frame; with a region's part
+    beyond the table kept while its cuts are judged (ClearGrasp 123's third holder lost with
+    the wall's holes and the table they close in: 0.53 -> 0.22) 0.731 and 15; without the
+    pieces of a lying object joined
     (``lying_pieces_joined``: ClearGrasp 080's lying bottle in three pieces, 0.88 -> 0.25 and
     two false instances) 0.692, 14 and 0.27; without the bodies that hide the table joined to
     the instance holding half of them too (``BODY_JOINED`` out of reach: ClearGrasp 123's
@@ -508,7 +511,7 @@ def test_measured_on_the_shared_real_frames(realdata):
             frames += 1
     assert frames == 11 and len(best) == 16
     assert false / frames <= 0.1
-    assert np.mean(best) >= 0.72 and sum(v >= 0.5 for v in best) >= 15  # one at 0.50
+    assert np.mean(best) >= 0.74 and sum(v >= 0.5 for v in best) >= 15  # one at 0.50
     assert len(container) == 8 and np.mean(container) >= 0.77
 
 
@@ -574,3 +577,36 @@ def test_opaque_objects_are_the_parts_whose_median_departure_is_high():
     assert not out[10:14, 2:6].any()  # no known departure
     assert out[10:14, 20:24].all()  # the unknown half does not count
     assert not out[~opaque].any()
+
+
+def test_a_region_is_cut_to_the_tables_columns_before_its_cuts_are_judged(monkeypatch):
+    """A glass at the table's far edge rises against a wall whose holes join its own beside
+    its top. The regions whose cuts are judged hold the glass's top beyond the edge but none
+    of the wall's holes off its columns, and the glass is found."""
+    rgb, depth, plane = _table_frame((110, 80, 60))
+    ids, _, _, _ = solids_on_table([(GLASS, 0.1, 0.0, 0.0)])
+    body = ids > 0
+    rows, cols = np.nonzero(body.any(axis=1))[0], np.nonzero(body.any(axis=0))[0]
+    edge = rows[0] + 15  # the glass's top 15 rows rise beyond the table's far edge
+    wall = np.arange(SHAPE[0])[:, None] < edge
+    depth = np.where(wall, 2.0 * depth, depth)  # the wall reads far behind the table's plane
+    holes = np.zeros(SHAPE, bool)  # the wall's dropouts, joined to the glass's top
+    holes[rows[0]:edge - 2, cols[-1] - 5:cols[-1] + 120] = True
+    rim = body & ~(cv2.erode(body.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0)
+    rgb[rim] = (240, 240, 240)
+    depth[body | holes] = 0.0
+    judged = []
+    split = tf.split_touching
+
+    def recorded(region, *args, **kwargs):
+        judged.append(region)
+        return split(region, *args, **kwargs)
+
+    monkeypatch.setattr(tf, "split_touching", recorded)
+    found = _segment(rgb, depth)
+    # off the columns of the glass's part over the table (widened by BEYOND_MARGIN, and by
+    # the outline's pixel or two)
+    beside = holes & (np.arange(SHAPE[1])[None, :] > cols[-1] + 2 + tf.BEYOND_MARGIN)
+    assert judged and not any((r & beside).any() for r in judged)
+    assert any((r & body & wall).sum() >= 0.8 * (body & wall).sum() for r in judged)
+    assert instance_ious(found.ids, ids)[1] > 0.85

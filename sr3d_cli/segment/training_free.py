@@ -713,7 +713,17 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     def by_colour(mask: np.ndarray) -> bool:
         return looks_opaque(mask, departure)
 
+    # the table's footprint less the band of dropouts along its edge, where the table meets
+    # the room
+    edge = along_table_edge(footprint, TABLE_EDGE_BAND)
+    over_table = footprint & ~edge
     for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
+        # beyond the table a region keeps only the columns its part over the table spans
+        # before its cuts are judged: the room's dropouts joined to a glass at the far edge
+        # make a whole that no cut parts (ClearGrasp 123: a wall's holes, the table they close
+        # in beside a notebook, and a holder; once the wall is gone, the holder is cut from
+        # the table, whose part then holds too little glass evidence to score)
+        region = within_table_columns(region, over_table)
         if region.sum() < least:  # no part of it could be kept: judging its cuts spends fits
             continue
         # a region or part opaque by its colour as a whole is not split (the revolution fits
@@ -752,10 +762,9 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     # the table above its whole span) is dropped, and beyond the table or along its edge the
     # others keep only the columns above their feet (the holes on the table beside a glass
     # at the far edge join the room's above them)
-    edge = along_table_edge(footprint, TABLE_EDGE_BAND)
-    masks = [within_table_columns(c.mask, footprint & ~edge) for c in joined]
+    masks = [within_table_columns(c.mask, over_table) for c in joined]
     keep = [i for i, m in enumerate(masks) if not m.any() or edge[m].mean() <= TABLE_EDGE_SHARE]
-    masks = [within_table_columns(masks[i], footprint & ~edge, feet=FEET_SHARE) for i in keep]
+    masks = [within_table_columns(masks[i], over_table, feet=FEET_SHARE) for i in keep]
     joined = [joined[i] for i in keep]
     masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height) for m in masks]
     if ev.stereo:  # a stereo camera's holes and bumps beside a glass: within its outline
