@@ -769,8 +769,8 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height) for m in masks]
     if ev.stereo:  # a stereo camera's holes and bumps beside a glass: within its outline
         seen = beside_room(rgb, depth_m, footprint, departure)
-        masks = [within_outline_hull(m, outline_evidence(seen, on_table),
-                                     own_pixels(seen, ev.height)) for m in masks]
+        edges, own = outline_evidence(seen, on_table), own_pixels(seen, ev.height)
+        masks = [within_outline_hull(m, edges, own) for m in masks]
     found = [Candidate(m, c.score) for m, c in zip(masks, joined)]
     return _without_overlaps(lying_pieces_joined(found, K, plane, depth_m, glass))
 
