@@ -197,6 +197,35 @@ def test_a_part_opaque_as_a_whole_is_not_split_again():
     assert tf.split_touching(region, K, plane, opaque=lambda m: True) == [region]
 
 
+def test_a_frame_fits_each_part_once(monkeypatch):
+    """The frame's fits are kept by their masks' pixels: a copy of a mask, or the same parts
+    judged again, costs no fit; another mask or occluders do. Three glasses in a row split with
+    the frame's fits give the same parts as with their own, and splitting again fits nothing."""
+    from sr3d_cli.segment import training_free as tf
+
+    made = []
+    fit = tf.fit_revolution
+    monkeypatch.setattr(tf, "fit_revolution", lambda *a, **k: made.append(1) or fit(*a, **k))
+    ids, K, plane, _ = solids_on_table([(GLASS, 0.1, -0.066, 0.0), (GLASS, 0.1, 0.0, 0.0),
+                                        (GLASS, 0.1, 0.066, 0.0)])
+    fits = tf._PartFits(K, plane, None)
+    one = ids == 1
+    first = fits(one)
+    assert fits(one.copy()) is first and fits.has(one.copy()) and len(made) == 1
+    assert fits(ids == 2) is not first and len(made) == 2
+    assert fits(one, ids == 2) is not first and len(made) == 3
+    alone = tf.split_touching(ids > 0, K, plane)
+    made.clear()
+    shared = tf.split_touching(ids > 0, K, plane, fits=fits)
+    assert len(shared) == len(alone) == 3
+    assert all(np.array_equal(a, b) for a, b in zip(alone, shared))
+    spent = len(made)
+    assert spent > 0
+    assert [p.sum() for p in tf.split_touching(ids > 0, K, plane, fits=fits)] == \
+        [p.sum() for p in shared]
+    assert len(made) == spent  # every part already fitted
+
+
 def test_splits_answers_at_the_first_cut_that_holds(monkeypatch):
     """``splits`` says whether ``split_touching`` cuts a region at all: three glasses in a row
     are cut, one goblet is not; it stops judging at the first cut that holds, where

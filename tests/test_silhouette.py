@@ -4,7 +4,8 @@ import pytest
 import trimesh
 
 from sr3d_cli.geometry.revolution import revolve
-from sr3d_cli.geometry.silhouette import face_twins, fill_silhouette, project_mesh
+from sr3d_cli.geometry.silhouette import (face_twins, fill_silhouette, front_triangles,
+                                          project_mesh, seen_triangles)
 from sr3d_cli.geometry.transforms import rotation_about
 
 K = np.array([[600.0, 0, 320.0], [0, 600.0, 240.0], [0, 0, 1]])
@@ -96,3 +97,32 @@ def test_face_twins_pairs_the_faces_across_each_edge():
     # an open surface: its rim edges have no face across
     opened = trimesh.Trimesh(box.vertices, box.faces[2:], process=False)
     assert (face_twins(opened.faces) == -1).sum() == 4
+
+
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_seen_triangles_match_the_whole_frame_drawing(name):
+    # the triangle seen at asked pixels, drawn only near them, against every front triangle
+    # drawn into the whole frame: objects inside it, across its edges, close to the camera
+    # (vertices clipped far beyond the frame), pixels scattered or bunched near the object
+    mesh = MESHES[name]()
+    faces = np.asarray(mesh.faces)
+    rng = np.random.default_rng(5)
+    shape = (480, 640)
+    seen = 0
+    for k in range(24):
+        R = rotation_about(rng.normal(size=3), rng.uniform(0, np.pi))
+        t = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.4, 0.4), rng.uniform(0.2, 1.0)])
+        uv, pts = project_mesh(np.asarray(mesh.vertices), R, t, rng.uniform(0.05, 0.6), K)
+        n = int(rng.integers(1, 500))
+        if k % 2:
+            centre = np.nan_to_num(np.nanmean(uv, axis=0), nan=300.0)
+            xs = np.clip(np.rint(centre[0] + rng.normal(0, 30, n)), 0, shape[1] - 1)
+            ys = np.clip(np.rint(centre[1] + rng.normal(0, 30, n)), 0, shape[0] - 1)
+            xs, ys = xs.astype(int), ys.astype(int)
+        else:
+            xs, ys = rng.integers(0, shape[1], n), rng.integers(0, shape[0], n)
+        expected = front_triangles(uv, pts[:, 2], faces, shape)[ys, xs]
+        assert np.array_equal(seen_triangles(uv, pts[:, 2], faces, shape, xs, ys), expected)
+        seen += int((expected >= 0).sum())
+    assert seen > 1000  # most poses show the object at many of the asked pixels
+    assert len(seen_triangles(uv, pts[:, 2], faces, shape, xs[:0], ys[:0])) == 0

@@ -213,12 +213,53 @@ def front_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     return _fill(np.full(shape, -1, np.int32), tri[index], index)
 
 
+def seen_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
+                   shape: tuple[int, int], xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """``front_triangles(uv, depth, faces, shape)[ys, xs]`` ``(n,) int``, the same values,
+    drawn only where asked: a triangle none of whose pixels can be asked for (its rounded
+    bounding box, the most cv2 takes for it, holds none of ``(xs, ys)``) cannot be the last
+    drawn there, and the rest are drawn in order in a box around them, 2 px wider on each side
+    that the image does not end (their vertices lie in the box or beyond the image's edge
+    alike, so cv2 cuts and fills them as in the whole image, moved by whole pixels)."""
+    xs, ys = np.asarray(xs, np.int64), np.asarray(ys, np.int64)
+    if len(xs) == 0:
+        return np.zeros(0, np.int32)
+    H, W = shape
+    tri = uv[faces]
+    front = np.isfinite(tri).all(axis=(1, 2)) & _facing(tri)
+    index = np.flatnonzero(front)
+    index = index[np.argsort(-depth[faces[index]].mean(axis=1), kind="stable")]
+    tri4 = _quarter_pixels(tri[index], shape)
+    lo = (_corners(tri4, np.minimum) + SUBPIXEL // 2) // SUBPIXEL
+    hi = (_corners(tri4, np.maximum) + SUBPIXEL // 2) // SUBPIXEL + 1
+    qx0, qy0 = int(xs.min()), int(ys.min())
+    asked = np.zeros((int(ys.max()) - qy0 + 1, int(xs.max()) - qx0 + 1), np.uint8)
+    asked[ys - qy0, xs - qx0] = 1
+    total = cv2.integral(asked)
+    h, w = asked.shape
+    x0, x1 = np.clip(lo[:, 0] - qx0, 0, w), np.clip(hi[:, 0] - qx0, 0, w)
+    y0, y1 = np.clip(lo[:, 1] - qy0, 0, h), np.clip(hi[:, 1] - qy0, 0, h)
+    near = (total[y1, x1] - total[y0, x1] - total[y1, x0] + total[y0, x0]) > 0
+    out = np.full(len(xs), -1, np.int32)
+    if not near.any():
+        return out
+    index, tri4, lo, hi = index[near], tri4[near], lo[near], hi[near]
+    bx0, by0 = max(int(lo[:, 0].min()) - 2, 0), max(int(lo[:, 1].min()) - 2, 0)
+    bx1, by1 = min(int(hi[:, 0].max()) + 2, W), min(int(hi[:, 1].max()) + 2, H)
+    box = np.full((by1 - by0, bx1 - bx0), -1, np.int32)
+    for t, v in zip(tri4 - np.array([bx0, by0], np.int32) * SUBPIXEL, index):
+        cv2.fillConvexPoly(box, t, int(v), lineType=cv2.LINE_8, shift=2)
+    inside = (xs >= bx0) & (xs < bx1) & (ys >= by0) & (ys < by1)
+    out[inside] = box[ys[inside] - by0, xs[inside] - bx0]
+    return out
+
+
 def surface_depth(uv: np.ndarray, pts: np.ndarray, faces: np.ndarray, K: np.ndarray,
                   xs: np.ndarray, ys: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Depth ``(n,)`` of a mesh's nearest front surface at pixels ``(xs, ys)`` (NaN: none), exact
     where each pixel's ray meets the plane of the triangle it sees. ``uv`` and ``pts`` come from
     :func:`project_mesh`."""
-    seen = front_triangles(uv, pts[:, 2], faces, shape)[ys, xs]
+    seen = seen_triangles(uv, pts[:, 2], faces, shape, xs, ys)
     hit = seen >= 0
     a, b, c = (pts[faces[seen[hit]]][:, j] for j in range(3))
     normal = np.cross(b - a, c - a)

@@ -717,6 +717,7 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     # the room
     edge = along_table_edge(footprint, TABLE_EDGE_BAND)
     over_table = footprint & ~edge
+    fits = _PartFits(K, plane, depth_m)  # every revolution fit of the frame, made once
     for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
         # beyond the table a region keeps only the columns its part over the table spans
         # before its cuts are judged: the room's dropouts joined to a glass at the far edge
@@ -732,7 +733,7 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
         # table's is found by its readings instead (standing_bodies)
         for mask in split_touching(region, K, plane, depth=depth_m, glass=glass,
                                    close_radius=close_radius, min_area=min_area,
-                                   opaque=by_colour):
+                                   opaque=by_colour, fits=fits):
             if least <= mask.sum() <= MAX_IMAGE_SHARE * size and not by_colour(mask) and \
                     shows_outline(mask, departure):
                 kept.append(Candidate(mask, float(glass[mask].mean())))
@@ -745,16 +746,17 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     out = [Candidate(grow_to_outline(c.mask, outline, close_radius=5,
                                      barred=claimed & ~c.mask), c.score) for c in kept]
     # a region cut at a dent in its evidence that the growth filled is one object again
-    out = rejoined(out, K, plane, depth_m, glass)
+    out = rejoined(out, K, plane, depth_m, glass, fits)
     bodies = standing_bodies(rgb, depth_m, ev, K, plane, min_area=least, close_radius=close_radius)
 
     def one_object(mask: np.ndarray) -> bool:
         return not splits(mask, K, plane, depth=depth_m, glass=glass,
-                          close_radius=close_radius, min_area=min_area)
+                          close_radius=close_radius, min_area=min_area, fits=fits)
 
     def parted(mask: np.ndarray) -> list[np.ndarray]:
         return split_touching(mask, K, plane, depth=depth_m, glass=glass,
-                              close_radius=close_radius, min_area=min_area, standing=True)
+                              close_radius=close_radius, min_area=min_area, standing=True,
+                              fits=fits)
 
     joined = with_bodies(out, bodies, glass | ev.above, one_object, parted)
     # an object stands on the table; a band of dropouts along the table's edge, where the
@@ -766,18 +768,18 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     keep = [i for i, m in enumerate(masks) if not m.any() or edge[m].mean() <= TABLE_EDGE_SHARE]
     masks = [within_table_columns(masks[i], over_table, feet=FEET_SHARE) for i in keep]
     joined = [joined[i] for i in keep]
-    masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height) for m in masks]
+    masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height, fits) for m in masks]
     if ev.stereo:  # a stereo camera's holes and bumps beside a glass: within its outline
         seen = beside_room(rgb, depth_m, footprint, departure)
         edges, own = outline_evidence(seen, on_table), own_pixels(seen, ev.height)
         masks = [within_outline_hull(m, edges, own) for m in masks]
     found = [Candidate(m, c.score) for m, c in zip(masks, joined)]
-    return _without_overlaps(lying_pieces_joined(found, K, plane, depth_m, glass))
+    return _without_overlaps(lying_pieces_joined(found, K, plane, depth_m, glass, fits=fits))
 
 
 def lying_pieces_joined(found: list[Candidate], K: np.ndarray, plane: Plane,
-                        depth_m: np.ndarray, glass: np.ndarray, reach: int = OUTLINE_REACH
-                        ) -> list[Candidate]:
+                        depth_m: np.ndarray, glass: np.ndarray, reach: int = OUTLINE_REACH,
+                        fits: "_PartFits | None" = None) -> list[Candidate]:
     """Candidates with the pieces of one lying object joined: two candidates (masks (H, W)
     bool) within ``reach`` pixels of each other, each fitted lying (a solid of revolution on
     ``plane``, camera ``K`` (3, 3), readings ``depth_m`` (H, W) metres), are one object when
@@ -790,8 +792,9 @@ def lying_pieces_joined(found: list[Candidate], K: np.ndarray, plane: Plane,
     on: its evidence comes in pieces along its axis (ClearGrasp 080's lying bottle, three
     pieces 22 and 1 px apart: the hull fits at 0.92 and 0.93, the pieces at 0.83 and 0.78 by
     area; extsim scene_0002's oil bottle: 0.78 against 0.76). Two lying objects side by side
-    draw worse as one (extsim scene_0006: 0.89 against 0.92)."""
-    fits = _PartFits(K, plane, depth_m)
+    draw worse as one (extsim scene_0006: 0.89 against 0.92). ``fits``: the frame's fits
+    (:class:`_PartFits`), made here when not given."""
+    fits = _PartFits(K, plane, depth_m) if fits is None else fits
 
     def lying(mask: np.ndarray):
         fit = fits(mask)
@@ -826,7 +829,7 @@ def lying_pieces_joined(found: list[Candidate], K: np.ndarray, plane: Plane,
 
 
 def rejoined(found: list[Candidate], K: np.ndarray, plane: Plane, depth_m: np.ndarray,
-             glass: np.ndarray) -> list[Candidate]:
+             glass: np.ndarray, fits: "_PartFits | None" = None) -> list[Candidate]:
     """Candidates grown to their outlines (:func:`grow_to_outline`; masks (H, W) bool) with
     the touching ones that are one object joined again: two candidates whose masks touch are
     one when a solid of revolution fitted to their union (camera ``K`` (3, 3) above
@@ -841,8 +844,9 @@ def rejoined(found: list[Candidate], K: np.ndarray, plane: Plane, depth_m: np.nd
     region better than one of the whole (extsim's lying bottle: parts 0.82 / 0.83, whole
     0.72). Grown to the outline, the dent is filled, and one fit of both draws them better
     (parts 0.92 / 0.87, union 0.95); touching objects still draw worse as one (extsim:
-    0.76-0.93 as one against 0.86-0.96 as two)."""
-    fits = _PartFits(K, plane, depth_m)
+    0.76-0.93 as one against 0.86-0.96 as two). ``fits``: the frame's fits
+    (:class:`_PartFits`), made here when not given."""
+    fits = _PartFits(K, plane, depth_m) if fits is None else fits
     out = list(found)
     k = np.ones((3, 3), np.uint8)
     i = 0
@@ -886,7 +890,7 @@ def _apart_by_readings(r: _RegionReadings, whole, union: np.ndarray, parts) -> b
 
 
 def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: np.ndarray,
-                       height: np.ndarray) -> np.ndarray:
+                       height: np.ndarray, fits: "_PartFits | None" = None) -> np.ndarray:
     """A standing glass's instance ``(H, W) bool`` with its opaque parts: the raw readings
     ``depth_m (H, W)`` metres above the table (``height (H, W)`` metres over it, 0 where no
     reading, :func:`on_table_readings`; over ``BODY_SEED_HEIGHT``) that lie within the
@@ -896,7 +900,8 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     A cap, lid or label reads well, so it gives no glass evidence and the instance stops below
     it (the real container's lid: a model 0.075-0.08 m tall for a 0.12 m container). Nothing
     else can hold readings inside the glass's own volume; an object beside or behind it lies
-    farther from its axis. Lying or unfitted instances are returned unchanged."""
+    farther from its axis. Lying or unfitted instances are returned unchanged. ``fits``: the
+    frame's fits (:class:`_PartFits`), made here when not given."""
     box = mask_window(mask, 0)
     if box is None:
         return mask
@@ -913,12 +918,8 @@ def with_parts_on_axis(mask: np.ndarray, K: np.ndarray, plane: Plane, depth_m: n
     above = height[y0:y1, x0:x1] > BODY_SEED_HEIGHT
     if not joined(above).any():  # nothing to take in: no fit needed
         return mask
-    try:
-        fit = fit_revolution(mask, K, plane, depth=depth_m,
-                             options=FitOptions(square_starts=False))
-    except ValueError:
-        return mask
-    if fit.resting != "standing":
+    fit = (_PartFits(K, plane, depth_m) if fits is None else fits)(mask)
+    if fit is None or fit.resting != "standing":
         return mask
     radius = float(fit.profile[:, 0].max()) * fit.height + ON_AXIS_MARGIN
     offset = depth_to_points(depth_m[y0:y1, x0:x1], window_K(K, x0, y0)) - fit.base
@@ -1174,27 +1175,39 @@ def _footprint_cut(region: np.ndarray, xs: np.ndarray, ys: np.ndarray, raw: np.n
 
 
 class _PartFits:
-    """:func:`~sr3d_cli.shape.revolution_fit.fit_revolution` of a region's parts (None for a
-    part that cannot stand or lie on the table), with the near-square lying starts off: they
-    cost a fifth of the segment time (one glass, one core: .52 -> .64 s per frame) and are for
-    the chosen object's fit, not for a cut. A part's fit without occluders is made once, kept
-    by the mask's id, with the mask itself (so that no other mask takes its id)."""
+    """:func:`~sr3d_cli.shape.revolution_fit.fit_revolution` of a frame's regions and their
+    parts (None for a part that cannot stand or lie on the table), with the near-square lying
+    starts off: they cost a fifth of the segment time (one glass, one core: .52 -> .64 s per
+    frame) and are for the chosen object's fit, not for a cut. Each fit is made once per
+    frame, kept by the pixels of its mask and occluders: the cuts of a region and of its parts,
+    and the later steps, ask for the same parts again (ClearGrasp 123: 12 of 92 fits)."""
 
     def __init__(self, K: np.ndarray, plane: Plane, depth: np.ndarray | None):
         self.K, self.plane, self.depth = K, plane, depth
-        self.alone: dict = {}  # id of a part's mask: (the mask, its fit without occluders)
+        self.made: dict = {}  # _content of the mask and the occluders: the fit
 
     def __call__(self, mask: np.ndarray, occluders: np.ndarray | None = None):
-        if occluders is None and id(mask) in self.alone:
-            return self.alone[id(mask)][1]
-        try:
-            found = fit_revolution(mask, self.K, self.plane, depth=self.depth,
-                                   occluders=occluders, options=FitOptions(square_starts=False))
-        except ValueError:  # a part that cannot stand or lie on the table
-            found = None
-        if occluders is None:
-            self.alone[id(mask)] = (mask, found)
-        return found
+        key = (_content(mask), None if occluders is None else _content(occluders))
+        if key not in self.made:
+            try:
+                self.made[key] = fit_revolution(mask, self.K, self.plane, depth=self.depth,
+                                                occluders=occluders,
+                                                options=FitOptions(square_starts=False))
+            except ValueError:  # a part that cannot stand or lie on the table
+                self.made[key] = None
+        return self.made[key]
+
+    def has(self, mask: np.ndarray) -> bool:
+        """Whether ``mask``'s fit without occluders is made."""
+        return (_content(mask), None) in self.made
+
+
+def _content(mask: np.ndarray) -> tuple:
+    """A key equal for two ``(H, W)`` bool masks exactly when their pixels are: the image's
+    shape, the set pixels' box and the box's bytes."""
+    mask = np.ascontiguousarray(mask, dtype=bool)
+    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
+    return mask.shape, x, y, w, h, mask[y:y + h, x:x + w].tobytes()
 
 
 @dataclass
@@ -1413,8 +1426,14 @@ def _fit_parts(reg: _Region, whole: _Whole, outline_may_hold: bool, a: np.ndarra
             if f_back is None:
                 f_back = reg.fits(back)
             return (f_front, f_back) if front is a else (f_back, f_front)
-    fa = reg.fits(a)
-    return (fa, reg.fits(b)) if _part_may_hold(fa, whole, outline_may_hold) else None
+    # either part that may not hold rules the cut out: the one already fitted is asked
+    # first, else the smaller (a small piece is the one no solid draws)
+    first, second = (a, b) if reg.fits.has(a) or (not reg.fits.has(b) and
+                                                  a.sum() <= b.sum()) else (b, a)
+    f_first = reg.fits(first)
+    if not _part_may_hold(f_first, whole, outline_may_hold):
+        return None
+    return (f_first, reg.fits(second)) if first is a else (reg.fits(second), f_first)
 
 
 def _by_readings(r: _RegionReadings, whole: _Whole, gain: float, a, fa, ia: float, sa: int,
@@ -1482,7 +1501,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
                    close_radius: int = 6, max_pieces: int = SPLIT_PIECES,
                    gain: float = SPLIT_GAIN, min_share: float = SPLIT_SHARE, min_area: int = 150,
                    whole=None, rounds: int = 2, opaque=None,
-                   standing: bool = False) -> list[np.ndarray]:
+                   standing: bool = False, fits: "_PartFits | None" = None) -> list[np.ndarray]:
     """Split a region made of touching objects where solids of revolution on the table explain
     the parts clearly better than one explains the whole.
 
@@ -1540,9 +1559,10 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     """
     if rounds < 1 or (opaque is not None and opaque(region)):
         return [region]
+    fits = _PartFits(K, plane, depth) if fits is None else fits
     best = None  # (key, parts with their fits)
     for key, parts in _held_cuts(region, K, plane, depth, glass, close_radius, max_pieces,
-                                 gain, min_share, min_area, whole):
+                                 gain, min_share, min_area, whole, fits):
         if standing and not all(f is not None and f.resting == "standing" for _, f in parts):
             continue
         if best is None or key > best[0]:
@@ -1554,19 +1574,23 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
                                        close_radius=close_radius, max_pieces=max_pieces,
                                        gain=gain, min_share=min_share, min_area=min_area,
                                        whole=own, rounds=rounds - 1, opaque=opaque,
-                                       standing=standing)]
+                                       standing=standing, fits=fits)]
 
 
 def splits(region: np.ndarray, K: np.ndarray, plane: Plane, *, depth: np.ndarray | None = None,
-           glass: np.ndarray | None = None, close_radius: int = 6, min_area: int = 150) -> bool:
+           glass: np.ndarray | None = None, close_radius: int = 6, min_area: int = 150,
+           fits: "_PartFits | None" = None) -> bool:
     """Whether :func:`split_touching` (default rules) cuts ``region`` ``(H, W) bool`` at all:
     true at the first cut that holds, without judging the rest or splitting the parts."""
+    fits = _PartFits(K, plane, depth) if fits is None else fits
     return any(True for _ in _held_cuts(region, K, plane, depth, glass, close_radius,
-                                        SPLIT_PIECES, SPLIT_GAIN, SPLIT_SHARE, min_area, None))
+                                        SPLIT_PIECES, SPLIT_GAIN, SPLIT_SHARE, min_area, None,
+                                        fits))
 
 
 def _held_cuts(region: np.ndarray, K: np.ndarray, plane: Plane, depth, glass, close_radius: int,
-               max_pieces: int, gain: float, min_share: float, min_area: int, whole):
+               max_pieces: int, gain: float, min_share: float, min_area: int, whole,
+               fits: _PartFits):
     """The cuts of ``region`` that hold (:func:`split_touching`'s rules and arguments), as
     ``(key, ((a, fit_a), (b, fit_b)))`` in the order they are judged; the largest key is
     the best cut. Lazy: the whole is fitted once a cut turns up, and each cut is judged only
@@ -1585,8 +1609,7 @@ def _held_cuts(region: np.ndarray, K: np.ndarray, plane: Plane, depth, glass, cl
         cuts += attached
     if not cuts:
         return
-    reg = _Region(region, K, plane, down_direction(region, K, plane), _PartFits(K, plane, depth),
-                  readings, gain)
+    reg = _Region(region, K, plane, down_direction(region, K, plane), fits, readings, gain)
     judged = None
     for i, (a, b) in enumerate(cuts):
         if readings is not None:
