@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sr3d_cli.geometry.camera import depth_to_points, pixel_rays, project
+from sr3d_cli.geometry.camera import pixel_rays, project
 
 if TYPE_CHECKING:
     from sr3d_cli.config import PlaneConfig
@@ -139,10 +139,15 @@ def fit_support_plane(depth_m: np.ndarray, K: np.ndarray, *, threshold: float = 
     valid = depth_m > 0
     if exclude is not None:
         valid &= ~exclude
-    pts = depth_to_points(depth_m, K)[valid]
+    # the points of the valid pixels in row order (as depth_to_points(...)[valid]), of the
+    # sampled ones only: a 1280x720 frame's every point costs 50 ms
+    v, u = np.nonzero(valid)
     rng = np.random.default_rng(seed)
-    if len(pts) > max_points:
-        pts = pts[rng.choice(len(pts), size=max_points, replace=False)]
+    if len(v) > max_points:
+        pick = rng.choice(len(v), size=max_points, replace=False)
+        v, u = v[pick], u[pick]
+    z = depth_m[v, u].astype(np.float64)
+    pts = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=-1)
     median_z = float(np.median(pts[:, 2])) if len(pts) else 1.0
     plane, inliers = fit_plane_ransac(pts, threshold=threshold * max(1.0, median_z ** 2),
                                       iterations=iterations, rng=rng)

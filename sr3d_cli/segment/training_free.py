@@ -241,8 +241,15 @@ def on_table_readings(depth_m: np.ndarray, K: np.ndarray, plane: Plane
     return height, on_table
 
 
+def colour_lab(rgb: np.ndarray) -> np.ndarray:
+    """``(H, W, 3) float32``: the CIELAB colour of ``rgb`` ``(H, W, 3) uint8`` (OpenCV's 8-bit
+    scale), smoothed over 3 px, as :func:`table_colour_departure` compares it."""
+    return cv2.cvtColor(cv2.GaussianBlur(rgb, (3, 3), 0), cv2.COLOR_RGB2LAB).astype(np.float32)
+
+
 def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray, window: int = COLOUR_WINDOW,
-                           surroundings: bool = False) -> np.ndarray:
+                           surroundings: bool = False, lab: np.ndarray | None = None
+                           ) -> np.ndarray:
     """How far each pixel's colour departs from the table's colour around it ``(H, W) float``,
     in units of the table's own spread (the 90th percentile of table pixels' departure, at
     least :data:`LEAST_SPREAD`), NaN where no table reading lies within ``window`` pixels;
@@ -253,9 +260,10 @@ def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray, window: int = 
     The table's local colour is the mean CIELAB colour of the pixels whose readings lie on the
     table, within the window. A transparent object shows the table through itself, so over
     most of its mask it departs little (edges and highlights aside); an opaque object's own
-    colour replaces the table's.
+    colour replaces the table's. ``lab``: :func:`colour_lab` of ``rgb`` where already made
+    (a frame's rules compare its colour three ways).
     """
-    lab = cv2.cvtColor(cv2.GaussianBlur(rgb, (3, 3), 0), cv2.COLOR_RGB2LAB).astype(np.float32)
+    lab = colour_lab(rgb) if lab is None else lab
     weight = on_table.astype(np.float32)
     share = cv2.blur(weight, (window, window))
     local = cv2.blur(lab * weight[..., None], (window, window)) / np.maximum(share, 1e-6)[..., None]
@@ -494,8 +502,8 @@ def over_feet(readings: np.ndarray, seeds: np.ndarray, depth_m: np.ndarray, K: n
 
 
 def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.ndarray,
-                    plane: Plane, *, min_area: int, close_radius: int
-                    ) -> list[tuple[np.ndarray, bool]]:
+                    plane: Plane, *, min_area: int, close_radius: int,
+                    lab: np.ndarray | None = None) -> list[tuple[np.ndarray, bool]]:
     """Glass objects found by their readings over the table: ``(mask, sees_table)`` each,
     mask ``(H, W) bool``; ``sees_table`` is False for a body that passes every test but the
     see-through one (:func:`with_bodies` joins such a body only to an instance that already
@@ -516,7 +524,7 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.nd
     within :data:`BODY_FEET_REACH` of the foot of one of those (:func:`over_feet`), closed
     and filled. A stereo camera's noise on a plain table leaves bumps a few millimetres high
     all over it; those beside the object join it through the closing, but stand on the table
-    beside its base, not over it.
+    beside its base, not over it. ``lab``: :func:`colour_lab` of ``rgb`` where already made.
     """
     high = ev.height > BODY_SEED_HEIGHT
     seeded = joined_to(ev.above, high)
@@ -527,7 +535,7 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.nd
     own = _closed(over_feet(seeded, seeded & high, depth_m, K, plane, BODY_FEET_REACH),
                   close_radius)
     departure = table_colour_departure(rgb, ev.on_table, window=SEE_THROUGH_WINDOW,
-                                       surroundings=True)
+                                       surroundings=True, lab=lab)
     valid = depth_m > 0
     out = []
     for k in range(1, count):
@@ -704,7 +712,8 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
               p.sum() <= MAX_IMAGE_SHARE * size]
     if grabcut_iterations > 0:
         pieces = [grabcut_refine(rgb, p, opaque, iterations=grabcut_iterations) for p in pieces]
-    departure = table_colour_departure(rgb, on_table)
+    lab = colour_lab(rgb)  # compared three ways: against the table, the surroundings, the room
+    departure = table_colour_departure(rgb, on_table, lab=lab)
     outline = outline_evidence(departure, on_table)
     kept = []
     least = max(min_area, int(MIN_IMAGE_SHARE * size))
@@ -747,7 +756,8 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
                                      barred=claimed & ~c.mask), c.score) for c in kept]
     # a region cut at a dent in its evidence that the growth filled is one object again
     out = rejoined(out, K, plane, depth_m, glass, fits)
-    bodies = standing_bodies(rgb, depth_m, ev, K, plane, min_area=least, close_radius=close_radius)
+    bodies = standing_bodies(rgb, depth_m, ev, K, plane, min_area=least, close_radius=close_radius,
+                             lab=lab)
 
     def one_object(mask: np.ndarray) -> bool:
         return not splits(mask, K, plane, depth=depth_m, glass=glass,
@@ -770,7 +780,7 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     joined = [joined[i] for i in keep]
     masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height, fits) for m in masks]
     if ev.stereo:  # a stereo camera's holes and bumps beside a glass: within its outline
-        seen = beside_room(rgb, depth_m, footprint, departure)
+        seen = beside_room(rgb, depth_m, footprint, departure, lab)
         edges, own = outline_evidence(seen, on_table), own_pixels(seen, ev.height)
         masks = [within_outline_hull(m, edges, own) for m in masks]
     found = [Candidate(m, c.score) for m, c in zip(masks, joined)]
@@ -957,7 +967,7 @@ def within_outline_hull(mask: np.ndarray, outline: np.ndarray, own: np.ndarray,
 
 
 def beside_room(rgb: np.ndarray, depth_m: np.ndarray, footprint: np.ndarray,
-                departure: np.ndarray) -> np.ndarray:
+                departure: np.ndarray, lab: np.ndarray | None = None) -> np.ndarray:
     """The colour departure ``departure`` ``(H, W)`` (:func:`table_colour_departure`) over the
     table's footprint ``(H, W) bool``, and beyond it the departure from the room's colour
     around each pixel: the same measure with the room's readings (``depth_m`` ``(H, W)``
@@ -965,8 +975,9 @@ def beside_room(rgb: np.ndarray, depth_m: np.ndarray, footprint: np.ndarray,
     the window (a room out of the sensor's range gives nothing to compare: the table's
     departure stays there). Beyond the table a glass shows, and stands out from, the wall or
     the room behind it; against the table's colour every pixel of a wall departs, its holes (a
-    stereo camera's shadows of the glass on it) too, and would count as a glass's outline."""
-    room = table_colour_departure(rgb, (depth_m > 0) & ~footprint)
+    stereo camera's shadows of the glass on it) too, and would count as a glass's outline.
+    ``lab``: :func:`colour_lab` of ``rgb`` where already made."""
+    room = table_colour_departure(rgb, (depth_m > 0) & ~footprint, lab=lab)
     return np.where(footprint | np.isnan(room), departure, room)
 
 
