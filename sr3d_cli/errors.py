@@ -36,6 +36,11 @@ class InputError(Sr3dError, ValueError):
         super().__init__(f"{self.path}: {problem}")
 
 
+class NoTable(Sr3dError):
+    """No support plane in a frame's depth where a step needs the table (the training-free
+    segmenter); the stage that knows the frame's files names the one at fault."""
+
+
 class FrameFailed(Sr3dError):
     """A frame ran but produced nothing it should have (a frame with objects and no grasp);
     what it wrote says why. The frame counts as failed (exit code 1)."""

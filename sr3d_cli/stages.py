@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from sr3d_cli.errors import InputError, Problem
+from sr3d_cli.errors import InputError, NoTable, Problem
 from sr3d_cli.geometry.occlusion import occluders, opaque_objects
 from sr3d_cli.geometry.plane import Plane, support_plane
 from sr3d_cli.geometry.transforms import place_points
@@ -127,7 +127,10 @@ def segment_frame(state: "FrameState", segmenter, backend: str, record: dict | N
     """Segment a frame: writes masks/<frame>.png and .json (:func:`write_instances`), keeps the
     instances in ``state`` and returns them (:class:`~sr3d_cli.segment.Instances`)."""
     frame = state.frame
-    instances = segmenter(frame.frame_id, frame.rgb, frame.depth_m, frame.camera.K)
+    try:
+        instances = segmenter(frame.frame_id, frame.rgb, frame.depth_m, frame.camera.K)
+    except NoTable as exc:
+        raise InputError(frame.scene.depth_path(frame.frame_id), str(exc)) from None
     write_instances(frame.scene, frame.frame_id, instances, backend, record)
     state.segmented(instances.ids, instances.objects)
     return instances

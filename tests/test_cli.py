@@ -173,3 +173,19 @@ def test_synth_writes_scenes_and_skips_existing(tmp_path):
     code, out, err = run("evaluate", tmp_path / "s", "--pred", "depth", "-q")
     assert code == 0, err
     assert json.loads((tmp_path / "s" / "metrics.json").read_text())["means"]["depth"]["frames"] == 2
+
+
+def test_a_frame_without_a_table_fails_naming_its_depth_file(tmp_path):
+    """The training-free segmenter finds glass where the table's readings fail: a frame whose
+    depth holds no plane (readings scattered over 0.3-3 m) fails with the depth file and the
+    way out named; the batch goes on with the next frame and the exit code says one failed."""
+    root = make_native_scene(tmp_path / "scene", n_frames=2)
+    noise = np.random.default_rng(0).uniform(0.3, 3.0, (24, 32)).astype(np.float32)
+    write_depth(root / "depth" / "000000.png", noise, 0.001)
+    result = CliRunner().invoke(cli, ["segment", str(root)])
+    assert result.exit_code == 1, result.output
+    assert "depth/000000.png: no support plane" in result.output
+    assert "needs the table in view" in result.output and "--import-dir" in result.output
+    assert "unexpected" not in result.output
+    assert (root / "masks" / "000001.png").is_file()
+    assert not (root / "masks" / "000000.png").exists()

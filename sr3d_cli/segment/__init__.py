@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from sr3d_cli.config import PlaneConfig, SegmentConfig
-from sr3d_cli.errors import InputError
+from sr3d_cli.errors import InputError, NoTable
 from sr3d_cli.geometry.camera import Camera
 from sr3d_cli.geometry.plane import support_plane
 from sr3d_cli.io import images
@@ -185,7 +185,11 @@ class TrainingFree:
         c = self.cfg
         shape = depth_m.shape
         rgb_w, depth_w, K_w = to_working_size(rgb, depth_m, K)
-        plane = support_plane(depth_w, K_w, self.plane_cfg)
+        try:
+            plane = support_plane(depth_w, K_w, self.plane_cfg)
+        except ValueError as exc:  # it finds glass by where the table's readings fail
+            raise NoTable(f"{exc}; the training-free segmenter needs the table in view "
+                          "(give masks: segment --import-dir, or SAM prompts)") from None
         found = segment_training_free(rgb_w, depth_w, K_w, plane, rough_factor=c.rough_factor,
                                       min_area=c.min_area, close_radius=c.close_radius,
                                       grabcut_iterations=c.grabcut_iterations,
