@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sr3d_cli.geometry.camera import pixel_rays, project
+from sr3d_cli.geometry.camera import pixel_rays, project, unproject
 
 if TYPE_CHECKING:
     from sr3d_cli.config import PlaneConfig
@@ -146,8 +146,7 @@ def fit_support_plane(depth_m: np.ndarray, K: np.ndarray, *, threshold: float = 
     if len(v) > max_points:
         pick = rng.choice(len(v), size=max_points, replace=False)
         v, u = v[pick], u[pick]
-    z = depth_m[v, u].astype(np.float64)
-    pts = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], axis=-1)
+    pts = unproject(np.column_stack([u, v]), depth_m[v, u], K)
     median_z = float(np.median(pts[:, 2])) if len(pts) else 1.0
     plane, inliers = fit_plane_ransac(pts, threshold=threshold * max(1.0, median_z ** 2),
                                       iterations=iterations, rng=rng)

@@ -206,11 +206,17 @@ def front_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     """Index ``(H, W) int32`` of the triangle seen at each pixel (-1: none), drawn far to near
     (painter's order by mean depth), front faces only. ``uv (n, 2)`` pixels and ``depth (n,)``
     of the vertices; pixels are the image's own (no window)."""
-    tri = uv[faces]
-    front = np.isfinite(tri).all(axis=(1, 2)) & _facing(tri)
-    index = np.flatnonzero(front)
-    index = index[np.argsort(-depth[faces[index]].mean(axis=1), kind="stable")]
+    tri, index = _far_to_near(uv, depth, faces)
     return _fill(np.full(shape, -1, np.int32), tri[index], index)
+
+
+def _far_to_near(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """The projected triangles ``(m, 3, 2)`` of ``faces`` and the indices of those facing the
+    camera, far to near (painter's order by mean vertex ``depth``, ties in face order)."""
+    tri = uv[faces]
+    index = np.flatnonzero(np.isfinite(tri).all(axis=(1, 2)) & _facing(tri))
+    return tri, index[np.argsort(-depth[faces[index]].mean(axis=1), kind="stable")]
 
 
 def seen_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
@@ -225,10 +231,7 @@ def seen_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     if len(xs) == 0:
         return np.zeros(0, np.int32)
     H, W = shape
-    tri = uv[faces]
-    front = np.isfinite(tri).all(axis=(1, 2)) & _facing(tri)
-    index = np.flatnonzero(front)
-    index = index[np.argsort(-depth[faces[index]].mean(axis=1), kind="stable")]
+    tri, index = _far_to_near(uv, depth, faces)
     tri4 = _quarter_pixels(tri[index], shape)
     lo = (_corners(tri4, np.minimum) + SUBPIXEL // 2) // SUBPIXEL
     hi = (_corners(tri4, np.maximum) + SUBPIXEL // 2) // SUBPIXEL + 1

@@ -1560,6 +1560,7 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
     A region or part for which ``opaque(mask)`` holds (a predicate on an (H, W) bool mask) is
     not split: an opaque object's parts are all dropped, and judging them only spends fits.
     With ``standing``, only cuts whose parts both fit standing hold (see :func:`with_bodies`).
+    ``fits``: the frame's fits (:class:`_PartFits`), made here when not given.
     Where one part stands in front of the other (:func:`~sr3d_cli.geometry.occlusion.in_front`),
     the part behind is fitted with the front part's pixels as hidden, so that it may reach down
     behind it (:func:`~sr3d_cli.shape.revolution_fit.fit_revolution`'s ``occluders``),
@@ -1592,7 +1593,8 @@ def splits(region: np.ndarray, K: np.ndarray, plane: Plane, *, depth: np.ndarray
            glass: np.ndarray | None = None, close_radius: int = 6, min_area: int = 150,
            fits: "_PartFits | None" = None) -> bool:
     """Whether :func:`split_touching` (default rules) cuts ``region`` ``(H, W) bool`` at all:
-    true at the first cut that holds, without judging the rest or splitting the parts."""
+    true at the first cut that holds, without judging the rest or splitting the parts.
+    ``fits``: the frame's fits (:class:`_PartFits`), made here when not given."""
     fits = _PartFits(K, plane, depth) if fits is None else fits
     return any(True for _ in _held_cuts(region, K, plane, depth, glass, close_radius,
                                         SPLIT_PIECES, SPLIT_GAIN, SPLIT_SHARE, min_area, None,
