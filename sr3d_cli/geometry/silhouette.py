@@ -191,14 +191,28 @@ def _corners(tri4: np.ndarray, pick) -> np.ndarray:
 def _boxes_inside(tri4: np.ndarray, inside: np.ndarray) -> np.ndarray:
     """Whether each triangle's ``tri4 (m, 3, 2)`` (quarter pixels) rounded bounding box, the
     most its cv2 fill takes, holds only pixels of ``inside (H, W)`` (or none of the image)."""
-    H, W = inside.shape
+    count, area = _box_sums(inside, (0, 0), *_rounded_boxes(tri4))
+    return count == area
+
+
+def _rounded_boxes(tri4: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each triangle's ``tri4 (m, 3, 2)`` (quarter pixels) rounded bounding box, the most its
+    cv2 fill takes: pixels ``lo (m, 2)`` to ``hi (m, 2)`` (x, y; ``hi`` past the last)."""
     lo = (_corners(tri4, np.minimum) + SUBPIXEL // 2) // SUBPIXEL
     hi = (_corners(tri4, np.maximum) + SUBPIXEL // 2) // SUBPIXEL + 1
-    x0, x1 = np.clip(lo[:, 0], 0, W), np.clip(hi[:, 0], 0, W)
-    y0, y1 = np.clip(lo[:, 1], 0, H), np.clip(hi[:, 1], 0, H)
-    total = cv2.integral(inside.astype(np.uint8))
-    count = total[y1, x1] - total[y0, x1] - total[y1, x0] + total[y0, x0]
-    return count == (x1 - x0) * (y1 - y0)
+    return lo, hi
+
+
+def _box_sums(image: np.ndarray, origin: tuple[int, int], lo: np.ndarray, hi: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """The set pixels of ``image (h, w)`` bool or 0/1, whose top-left pixel is the image's
+    ``origin`` (x, y), in each box ``lo``-``hi`` (:func:`_rounded_boxes`) cut to it, and the
+    cut boxes' areas: ``(m,)`` each."""
+    h, w = image.shape
+    x0, x1 = np.clip(lo[:, 0] - origin[0], 0, w), np.clip(hi[:, 0] - origin[0], 0, w)
+    y0, y1 = np.clip(lo[:, 1] - origin[1], 0, h), np.clip(hi[:, 1] - origin[1], 0, h)
+    total = cv2.integral(image.astype(np.uint8))
+    return total[y1, x1] - total[y0, x1] - total[y1, x0] + total[y0, x0], (x1 - x0) * (y1 - y0)
 
 
 def front_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
@@ -233,16 +247,11 @@ def seen_triangles(uv: np.ndarray, depth: np.ndarray, faces: np.ndarray,
     H, W = shape
     tri, index = _far_to_near(uv, depth, faces)
     tri4 = _quarter_pixels(tri[index], shape)
-    lo = (_corners(tri4, np.minimum) + SUBPIXEL // 2) // SUBPIXEL
-    hi = (_corners(tri4, np.maximum) + SUBPIXEL // 2) // SUBPIXEL + 1
+    lo, hi = _rounded_boxes(tri4)
     qx0, qy0 = int(xs.min()), int(ys.min())
     asked = np.zeros((int(ys.max()) - qy0 + 1, int(xs.max()) - qx0 + 1), np.uint8)
     asked[ys - qy0, xs - qx0] = 1
-    total = cv2.integral(asked)
-    h, w = asked.shape
-    x0, x1 = np.clip(lo[:, 0] - qx0, 0, w), np.clip(hi[:, 0] - qx0, 0, w)
-    y0, y1 = np.clip(lo[:, 1] - qy0, 0, h), np.clip(hi[:, 1] - qy0, 0, h)
-    near = (total[y1, x1] - total[y0, x1] - total[y1, x0] + total[y0, x0]) > 0
+    near = _box_sums(asked, (qx0, qy0), lo, hi)[0] > 0
     out = np.full(len(xs), -1, np.int32)
     if not near.any():
         return out
