@@ -44,6 +44,7 @@ CLOTH_REACH = (150, 100, 80)  # px at 1280 wide: the cloth beside, above and bel
 CLOTH_WHITE = 0.35  # share of each pixel's distance to white kept under the cloth
 PAIR_GAPS = (40, 100)  # px at 1280 wide between a one-object frame's object and its copy
 PAIR_BAND = 15  # px at 1280 wide around the object copied with it (its holes, its shadow)
+SHIFTS = ((0, 1), (1, 0), (1, 1))  # (down, right) px: the frame moved by a pixel (shifted)
 
 
 def segmentation_scores(pred: np.ndarray, truth: np.ndarray) -> dict:
@@ -113,9 +114,10 @@ def under_white_cloth(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray
 
 def segment_modified(root: Path, cfg: Config, make, label: str) -> dict:
     """Segmentation alone (the default segmenter) on every frame below ``root`` as ``make``
-    changes it: ``make(frame, truth)`` returns (rgb, depth, true ids) or None to skip the
-    frame. Totals as :func:`segmentation_scores` counts them: frames, objects, detection,
-    mean best IoU, false instances per frame."""
+    changes it: ``make(frame, truth)`` returns (rgb, depth, true ids), with the frame's K
+    (3, 3) after them where it changes too, or None to skip the frame. Totals as
+    :func:`segmentation_scores` counts them: frames, objects, detection, mean best IoU, false
+    instances per frame."""
     segmenter = Segmenter(cfg.segment, cfg.plane)
     ious, false = [], []
     for scene in discover_scenes(root, IOConfig(), None):
@@ -124,8 +126,9 @@ def segment_modified(root: Path, cfg: Config, make, label: str) -> dict:
             made = make(frame, scene.load_mask(scene.gt_mask_path(fid), frame.depth_m.shape))
             if made is None:
                 continue
-            rgb, depth, truth = made
-            seg = segmentation_scores(segmenter(fid, rgb, depth, frame.camera.K).ids, truth)
+            rgb, depth, truth, *K = made
+            K = K[0] if K else frame.camera.K
+            seg = segmentation_scores(segmenter(fid, rgb, depth, K).ids, truth)
             ious += list(seg["best_iou"].values())
             false.append(seg["false"])
             print(scene.frame_key(fid), f"{label}: IoU",
@@ -168,6 +171,35 @@ def beside_itself(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, gap: in
     oy, ox = np.nonzero(obj)
     ids[oy, ox + shift] = 2
     return rgb, out, ids
+
+
+def shifted(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, K: np.ndarray,
+            down: int, right: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The frame's content moved ``down`` and ``right`` pixels, the first rows and columns
+    repeated into the gap, and K (3, 3) with its principal point moved with it. rgb (H, W, 3)
+    uint8, depth (H, W) metres, truth (H, W) ids. The segmenter reduces a 1280 px frame by
+    keeping one reading in each 2x2 block: moved by a pixel, the frame keeps another of the
+    four, an equally likely view of the same scene."""
+    def move(a: np.ndarray) -> np.ndarray:
+        pad = ((down, 0), (right, 0)) + ((0, 0),) * (a.ndim - 2)
+        return np.pad(a, pad, mode="edge")[:a.shape[0], :a.shape[1]]
+
+    K = np.array(K, dtype=np.float64)
+    K[0, 2] += right
+    K[1, 2] += down
+    return move(rgb), move(depth), move(truth), K
+
+
+def shift_scores(root: Path, cfg: Config) -> dict:
+    """:func:`segment_modified` on every frame below ``root`` moved by each of :data:`SHIFTS`
+    (:func:`shifted`): ``{"down,right": totals}``."""
+    def shift(down: int, right: int):
+        return lambda frame, truth: shifted(frame.rgb, frame.depth_m, truth, frame.camera.K,
+                                            down, right)
+
+    found = {f"{d},{r}": segment_modified(root, cfg, shift(d, r), f"moved {d},{r} px")
+             for d, r in SHIFTS}
+    return {key: totals for key, totals in found.items() if totals}
 
 
 def pair_scores(root: Path, cfg: Config) -> dict:
@@ -270,6 +302,7 @@ def realdata_section(work: Path, cfg: Config) -> dict:
     out["peak_mib"] = peak_memory_mib(root, work / "realdata_memory")
     out["cloth"] = cloth_scores(root, cfg)
     out["pair"] = pair_scores(root, cfg)
+    out["shifted"] = shift_scores(root, cfg)
     return out
 
 
@@ -326,6 +359,14 @@ def report(results: dict) -> list[str]:
                                    f"{p['detection']:.2f}, mean best IoU {p['mean_iou']:.3f}, "
                                    f"false instances per frame {p['false_per_frame']:.2f}"
                                    for gap, p in r["pair"].items()))
+        if r.get("shifted"):
+            lines.append("- the same frames moved by one pixel (the segmenter's 2x2 reduction "
+                         "then keeps another reading of each block; segment alone): " +
+                         "; ".join(f"down {key.split(',')[0]}, right {key.split(',')[1]}: "
+                                   f"detected {p['detection']:.2f}, mean best IoU "
+                                   f"{p['mean_iou']:.3f}, false instances per frame "
+                                   f"{p['false_per_frame']:.2f}"
+                                   for key, p in r["shifted"].items()))
         if "pose" in r:
             p = r["pose"]
             lines.append(

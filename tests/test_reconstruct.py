@@ -154,6 +154,25 @@ def test_the_fits_fast_helpers_give_numpys_exact_numbers():
     assert revolution_fit._pixels(np.zeros((5, 5), bool))[0].size == 0
 
 
+def test_a_model_drawn_far_from_a_small_mask_ends_the_fit_without_error():
+    """The fit's rotated window is centred between the model's ends and reaches as far as the
+    window's diagonal: a 4 px mask at one end of a window that an occluder at the other end
+    widens, with the model drawn beside that occluder, leaves none of the mask in it."""
+    plane = _table(45.0, 0.6)
+    mask = np.zeros((480, 640), bool)
+    mask[300:304, 100:104] = True
+    occluders = np.zeros((480, 640), bool)
+    occluders[296:300, 540:560] = True
+    base = plane.intersect(np.array([(450 - K[0, 2]) / K[0, 0], (305 - K[1, 2]) / K[1, 1], 1.0]))
+    start = revolution_fit._Model(base, plane.normal.copy(), 0.02, np.full(40, 0.01))
+    window = revolution_fit._Frame.along(start, mask, K, occluders)
+    assert window.draw(start, K, mask.shape).sum() > 100 and not window.obs.any()
+    model, iou = revolution_fit._fit(start, mask, K, plane, "standing", 12,
+                                     occluders=occluders)
+    assert iou == 0.0
+    assert np.all(np.isfinite(model.base)) and model.height > 0
+
+
 @pytest.mark.parametrize("elevation", [30.0, 60.0])
 def test_standing_cylinder_recovered(elevation):
     plane = _table(elevation, 0.6)

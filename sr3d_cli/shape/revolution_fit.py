@@ -220,6 +220,11 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         if it == iterations or not ren.any():
             break
         obs = frame.seen(ren)
+        if not obs.any():
+            # the rotated image, centred between the model's ends, holds the mask's window
+            # only as far as its diagonal reaches: a model drawn far from a small mask can
+            # leave none of it there, and then no gap to close
+            break
         if not keep_radii:
             rows = frame.point(project(model.centres(), K))[:, 1]
             ratio = (_widths(obs, rows) + 0.5) / (_widths(ren, rows) + 0.5)
