@@ -707,6 +707,24 @@ def test_sam_onnx_masks_follow_the_box_prompts(tmp_path, sam_files):
     assert inst.objects[0]["score"] == pytest.approx(0.9)
 
 
+def test_sam_onnx_is_prompted_with_the_kept_instances_boxes_only(tmp_path, sam_files,
+                                                                   monkeypatch):
+    """Without prompts of the user's, SAM gets the boxes of the training-free instances that
+    score at least segment.min_score: a low-scored one is no object to prompt for."""
+    from sr3d_cli.segment import TrainingFree
+
+    kept, low = np.zeros((48, 80), bool), np.zeros((48, 80), bool)
+    kept[5:30, 10:20] = True
+    low[10:20, 40:60] = True
+    monkeypatch.setattr(TrainingFree, "__call__", lambda self, fid, rgb, depth, K:
+                        ([kept, low], [0.8, 0.2]))
+    cfg = SegmentConfig(backend="sam-onnx", sam_encoder=str(sam_files[0]),
+                        sam_decoder=str(sam_files[1]), min_area=5, min_score=0.3)
+    inst = Segmenter(cfg, PlaneConfig())("f", np.zeros((48, 80, 3), np.uint8),
+                                         np.ones((48, 80), np.float32), np.eye(3))
+    assert [o["bbox"] for o in inst.objects] == [[10, 5, 19, 29]]
+
+
 def test_sam_tensor_mismatch_is_one_clear_error(tmp_path, sam_files):
     bad = onnx_builders.sam_box_decoder(tmp_path / "bad.onnx", masks_name="mask_logits")
     cfg = SegmentConfig(backend="sam-onnx", sam_encoder=str(sam_files[0]), sam_decoder=str(bad))

@@ -194,7 +194,8 @@ class TrainingFree:
                                       min_area=c.min_area, close_radius=c.close_radius,
                                       grabcut_iterations=c.grabcut_iterations,
                                       max_object_share=c.max_object_share,
-                                      stereo_baseline=c.stereo_baseline)
+                                      stereo_baseline=c.stereo_baseline,
+                                      min_score=c.min_score)
         return [to_full_size(f.mask, shape) for f in found], [f.score for f in found]
 
 
@@ -226,7 +227,8 @@ class SamPrompted:
     def __call__(self, frame_id: str, rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray
                  ) -> tuple[list[np.ndarray], list[float]]:
         """SAM's masks and predicted IoUs, one per prompt: the user's points, else the user's
-        boxes, else the boxes of the training-free backend's instances."""
+        boxes, else the boxes of the training-free backend's instances scored at least
+        ``segment.min_score`` (the ones it would keep)."""
         c = self.cfg
         shape = depth_m.shape
         embedding, scale = self.sam.embed(rgb)
@@ -238,6 +240,7 @@ class SamPrompted:
             if c.boxes:
                 boxes = read_prompts(Path(c.boxes), frame_id, "boxes")
             else:
-                boxes = [bbox(m) for m in self.default(frame_id, rgb, depth_m, K)[0]]
+                masks, scores = self.default(frame_id, rgb, depth_m, K)
+                boxes = [bbox(m) for m, s in zip(masks, scores) if s >= c.min_score]
             found = [self.sam.segment_box(embedding, scale, np.asarray(b), shape) for b in boxes]
         return [m for m, _ in found], [s for _, s in found]

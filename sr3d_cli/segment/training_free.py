@@ -693,10 +693,15 @@ def grabcut_refine(rgb: np.ndarray, candidate: np.ndarray, opaque: np.ndarray, *
 def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, plane: Plane, *,
                           rough_factor: float = 2.0, min_area: int = 150, close_radius: int = 6,
                           grabcut_iterations: int = 4, max_object_share: float = 0.25,
-                          stereo_baseline: float = 0.05) -> list[Candidate]:
+                          stereo_baseline: float = 0.05, min_score: float = 0.0
+                          ) -> list[Candidate]:
     """Instance candidates of transparent objects in one RGB-D frame.
 
     rgb : (H, W, 3) uint8; depth_m : (H, W) metres (0 = none); K : (3, 3); plane : the table.
+    A region scored below ``min_score`` (its share of glass evidence) is dropped as soon as
+    it is scored, before the candidates grow and join: a frame's scattered holes on the
+    table, closed into a network that encloses a wide patch of it, score low, and kept to
+    the end they take the pixels of a glass beside them and both are lost.
     Returns candidates sorted by area (largest first); masks do not overlap.
     """
     ev = evidence_maps(depth_m, K, plane, rough_factor=rough_factor,
@@ -746,6 +751,7 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
             if least <= mask.sum() <= MAX_IMAGE_SHARE * size and not by_colour(mask) and \
                     shows_outline(mask, departure):
                 kept.append(Candidate(mask, float(glass[mask].mean())))
+    kept = [c for c in kept if c.score >= min_score]
     # never grown into: another instance, or an opaque object and the band of missing readings
     # a stereo camera leaves around it
     claimed = cv2.dilate(opaque_objects(opaque, departure).astype(np.uint8),
