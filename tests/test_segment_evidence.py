@@ -479,6 +479,32 @@ def test_a_body_that_hides_the_table_joins_only_the_instance_holding_half_of_it(
     assert len(found) == 2 and np.array_equal(found[1], alone)
 
 
+def test_a_body_whose_join_splits_is_kept_beside_the_instance_where_it_is_a_body_itself():
+    """with_bodies: where joining a body that shows the table to the instance it overlaps
+    splits (two objects touching), the body's part beyond the instance is a new instance if
+    that part passes the body tests itself; else (a flat, fully read notebook that joined a
+    glass's body) it adds nothing, and without tests neither."""
+    shape = (120, 160)
+    top = np.zeros(shape, bool)
+    top[20:50, 40:80] = True  # an instance found by the holes on a container's lid
+    body = np.zeros(shape, bool)
+    body[40:100, 45:75] = True  # the container read smoothly: 10 of its 60 rows inside
+    rest = body & ~top
+
+    def masks(tests):
+        found = tf.with_bodies([tf.Candidate(top, 0.9)], [(body, True)], np.ones(shape, bool),
+                               lambda mask: False, lambda mask: [mask], tests)
+        return [c.mask for c in found]
+
+    asked = []
+    found = masks(lambda mask: asked.append(mask) or True)
+    assert len(found) == 2 and np.array_equal(found[0], top) and np.array_equal(found[1], rest)
+    assert len(asked) == 1 and np.array_equal(asked[0], rest)
+    assert [m.sum() for m in masks(lambda mask: None)] == [top.sum()]
+    assert [m.sum() for m in masks(lambda mask: False)] == [top.sum()]
+    assert [m.sum() for m in masks(None)] == [top.sum()]
+
+
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
@@ -519,10 +545,13 @@ def test_measured_on_the_shared_real_frames(realdata):
 def test_the_container_views_moved_by_a_pixel(realdata):
     """The 8 Tracebot views moved one pixel right (the first column repeated, K's principal
     point moved with them): the segmenter's 2x2 reduction then keeps the other reading of
-    each block's row. Measured: the container found in 7 of 8 views, mean best IoU 0.66; with
-    the regions scored below segment.min_score kept until the end, 6 of 8 and 0.58 (view
-    000001: the table's scattered holes close into a network that encloses a wide patch of
-    the table, score 0.22, and take in the container's readings)."""
+    each block's row. Measured: the container found in 8 of 8 views, mean best IoU 0.74; with
+    a body left out where its join to the instance it overlaps splits, 7 of 8 and 0.66 (view
+    000079: the holes on the lid are an instance, the container read smoothly below it is
+    another object by the cuts, and was dropped: 0.10); with the regions scored below
+    segment.min_score also kept until the end, 6 of 8 and 0.58 (view 000001: the table's
+    scattered holes close into a network that encloses a wide patch of the table, score 0.22,
+    and take in the container's readings)."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
@@ -540,7 +569,7 @@ def test_the_container_views_moved_by_a_pixel(realdata):
             inst = segmenter(fid, moved(frame.rgb), moved(frame.depth_m), K)
             best += list(instance_ious(inst.ids, moved(truth)).values())
     assert len(best) == 8
-    assert sum(v >= 0.5 for v in best) >= 7 and np.mean(best) >= 0.65
+    assert min(best) >= 0.5 and np.mean(best) >= 0.73
 
 
 def test_fill_holes_in_the_box_fills_what_scipy_fills():

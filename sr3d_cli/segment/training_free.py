@@ -501,9 +501,34 @@ def over_feet(readings: np.ndarray, seeds: np.ndarray, depth_m: np.ndarray, K: n
     return out
 
 
-def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.ndarray,
-                    plane: Plane, *, min_area: int, close_radius: int,
-                    lab: np.ndarray | None = None) -> list[tuple[np.ndarray, bool]]:
+class BodyTests:
+    """The tests of a standing body (:func:`standing_bodies`) on one frame: called on a mask
+    ``(H, W) bool``, None where it fails one of size (``min_area`` pixels), holes
+    (:data:`BODY_HOLES`) and height (:data:`BODY_HEIGHT`), else whether it shows the table
+    (:data:`BODY_SEES_TABLE` of its pixels table-like in colour within
+    :data:`SEE_THROUGH_WINDOW`, or like their surroundings where no table reading is near).
+    ``lab``: :func:`colour_lab` of ``rgb`` where already made."""
+
+    def __init__(self, rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, *, min_area: int,
+                 lab: np.ndarray | None = None):
+        self.valid, self.height, self.min_area = depth_m > 0, ev.height, min_area
+        self.departure = table_colour_departure(rgb, ev.on_table, window=SEE_THROUGH_WINDOW,
+                                                surroundings=True, lab=lab)
+
+    def __call__(self, mask: np.ndarray) -> bool | None:
+        area = int(mask.sum())
+        read = mask & self.valid
+        if area < self.min_area or not read.any() or (area - read.sum()) < BODY_HOLES * area:
+            return None
+        if np.percentile(self.height[read], 95) < BODY_HEIGHT:
+            return None
+        known = self.departure[mask]
+        known = known[np.isfinite(known)]
+        return bool(known.size and np.mean(known < TABLE_LIKE) >= BODY_SEES_TABLE)
+
+
+def standing_bodies(depth_m: np.ndarray, ev: Evidence, K: np.ndarray, plane: Plane,
+                    tests: BodyTests, *, close_radius: int) -> list[tuple[np.ndarray, bool]]:
     """Glass objects found by their readings over the table: ``(mask, sees_table)`` each,
     mask ``(H, W) bool``; ``sees_table`` is False for a body that passes every test but the
     see-through one (:func:`with_bodies` joins such a body only to an instance that already
@@ -516,15 +541,15 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.nd
     :data:`SEE_THROUGH_WINDOW` of it (a glass on a white cloth the sensor returns nothing
     from), it is the colour of its surroundings it must show. A body: the readings clearly
     above the table joined to one at least :data:`BODY_SEED_HEIGHT` high (the table's own
-    bumps never reach that), closed and filled, at least ``min_area`` pixels and
-    :data:`BODY_HEIGHT` tall; it is judged by all of them.
+    bumps never reach that), closed and filled, that passes ``tests`` (:class:`BodyTests`: at
+    least its ``min_area`` pixels and :data:`BODY_HEIGHT` tall); it is judged by all of them.
 
     Its mask keeps only the readings that stand over the object's own footprint: those at
     least :data:`BODY_SEED_HEIGHT` high and the lower ones whose foot on the table lies
     within :data:`BODY_FEET_REACH` of the foot of one of those (:func:`over_feet`), closed
     and filled. A stereo camera's noise on a plain table leaves bumps a few millimetres high
     all over it; those beside the object join it through the closing, but stand on the table
-    beside its base, not over it. ``lab``: :func:`colour_lab` of ``rgb`` where already made.
+    beside its base, not over it.
     """
     high = ev.height > BODY_SEED_HEIGHT
     seeded = joined_to(ev.above, high)
@@ -534,28 +559,19 @@ def standing_bodies(rgb: np.ndarray, depth_m: np.ndarray, ev: Evidence, K: np.nd
         return []
     own = _closed(over_feet(seeded, seeded & high, depth_m, K, plane, BODY_FEET_REACH),
                   close_radius)
-    departure = table_colour_departure(rgb, ev.on_table, window=SEE_THROUGH_WINDOW,
-                                       surroundings=True, lab=lab)
-    valid = depth_m > 0
     out = []
     for k in range(1, count):
         mask = labels == k
-        area = int(mask.sum())
-        read = mask & valid
-        if area < min_area or not read.any() or (area - read.sum()) < BODY_HOLES * area:
+        sees_table = tests(mask)
+        if sees_table is None:
             continue
-        if np.percentile(ev.height[read], 95) < BODY_HEIGHT:
-            continue
-        known = departure[mask]
-        known = known[np.isfinite(known)]
         kept = mask & own
-        out.append((kept if kept.sum() >= min_area else mask,
-                    bool(known.size and np.mean(known < TABLE_LIKE) >= BODY_SEES_TABLE)))
+        out.append((kept if kept.sum() >= tests.min_area else mask, sees_table))
     return out
 
 
 def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
-                evidence: np.ndarray, one_object, parted) -> list[Candidate]:
+                evidence: np.ndarray, one_object, parted, tests=None) -> list[Candidate]:
     """Candidates with the :func:`standing_bodies` joined in.
 
     A body that does not show the table counts only where one candidate holds
@@ -573,7 +589,11 @@ def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
     (:data:`BODY_INSIDE`) is a part of it and adds nothing. A body that one candidate overlaps
     less is joined to it: that candidate's glass evidence covered only the part of the object
     the sensor failed on, unless the join is no longer ``one_object`` (a callable on an
-    ``(H, W) bool`` mask: :func:`splits` finds no cut). A body that two candidates share
+    ``(H, W) bool`` mask: :func:`splits` finds no cut); then the body's part beyond that
+    candidate is another object touching it, new like a body overlapping none where it
+    passes ``tests`` itself (:class:`BodyTests`) and shows the table (a container read
+    smoothly beside the holes on its lid; not a notebook that joined a glass's body, flat and
+    fully read). A body that two candidates share
     (:data:`BODY_SHARED` of it each) is touching objects the candidates have already parted,
     and adds nothing.
     """
@@ -595,6 +615,11 @@ def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
             joined = out[j].mask | free
             if one_object(joined):
                 out[j] = Candidate(joined, out[j].score)
+            elif tests is not None:
+                rest = free & ~out[j].mask
+                if tests(rest):
+                    out += [Candidate(part, float(evidence[part].mean()))
+                            for part in parted(rest)]
     return out
 
 
@@ -762,8 +787,8 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
                                      barred=claimed & ~c.mask), c.score) for c in kept]
     # a region cut at a dent in its evidence that the growth filled is one object again
     out = rejoined(out, K, plane, depth_m, glass, fits)
-    bodies = standing_bodies(rgb, depth_m, ev, K, plane, min_area=least, close_radius=close_radius,
-                             lab=lab)
+    tests = BodyTests(rgb, depth_m, ev, min_area=least, lab=lab)
+    bodies = standing_bodies(depth_m, ev, K, plane, tests, close_radius=close_radius)
 
     def one_object(mask: np.ndarray) -> bool:
         return not splits(mask, K, plane, depth=depth_m, glass=glass,
@@ -774,7 +799,7 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
                               close_radius=close_radius, min_area=min_area, standing=True,
                               fits=fits)
 
-    joined = with_bodies(out, bodies, glass | ev.above, one_object, parted)
+    joined = with_bodies(out, bodies, glass | ev.above, one_object, parted, tests)
     # an object stands on the table; a band of dropouts along the table's edge, where the
     # table meets the room, is none: one lying mostly along the edge (with what lies beyond
     # the table above its whole span) is dropped, and beyond the table or along its edge the
