@@ -555,15 +555,15 @@ def test_the_container_views_moved_by_a_pixel(realdata):
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
+    def moved(a: np.ndarray) -> np.ndarray:
+        return np.pad(a, ((0, 0), (1, 0)) + ((0, 0),) * (a.ndim - 2), mode="edge")[:, :a.shape[1]]
+
     segmenter = Segmenter(SegmentConfig(), PlaneConfig())
     best = []
     for source in discover_scenes(realdata.parent / "tracebot-dev", IOConfig(), None):
         for fid in source.frame_ids():
             frame = source.load_frame(fid)
             truth = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
-            def moved(a):
-                return np.pad(a, ((0, 0), (1, 0)) + ((0, 0),) * (a.ndim - 2),
-                              mode="edge")[:, :a.shape[1]]
             K = frame.camera.K.astype(np.float64).copy()
             K[0, 2] += 1
             inst = segmenter(fid, moved(frame.rgb), moved(frame.depth_m), K)
