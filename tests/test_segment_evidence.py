@@ -508,7 +508,7 @@ def test_a_body_whose_join_splits_is_kept_beside_the_instance_where_it_is_a_body
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.750, 16 of 16 objects at IoU >= 0.5 (two at 0.50 and 0.53), false
+    per true object mean 0.754, 16 of 16 objects at IoU >= 0.5 (two at 0.53 and 0.56), false
     instances (>= 300 px, IoU < 0.2 with every object) 0.09 per frame; with a region's part
     beyond the table kept while its cuts are judged (ClearGrasp 123's third holder lost with
     the wall's holes and the table they close in: 0.53 -> 0.22) 0.731 and 15; without the
@@ -517,7 +517,7 @@ def test_measured_on_the_shared_real_frames(realdata):
     two false instances) 0.692, 14 and 0.27; without the bodies that hide the table joined to
     the instance holding half of them too (``BODY_JOINED`` out of reach: ClearGrasp 123's
     holders 0.84 and 0.85 drop to 0.66 and 0.59) 0.665, 14 and 0.27. The 8 views of the
-    capped container: mean IoU 0.783."""
+    capped container: mean IoU 0.785."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
@@ -537,7 +537,7 @@ def test_measured_on_the_shared_real_frames(realdata):
             frames += 1
     assert frames == 11 and len(best) == 16
     assert false / frames <= 0.1
-    assert np.mean(best) >= 0.74 and sum(v >= 0.5 for v in best) >= 15  # one at 0.50
+    assert np.mean(best) >= 0.74 and sum(v >= 0.5 for v in best) >= 15  # one at 0.53
     assert len(container) == 8 and np.mean(container) >= 0.77
 
 
@@ -552,24 +552,53 @@ def test_the_container_views_moved_by_a_pixel(realdata):
     segment.min_score also kept until the end, 6 of 8 and 0.58 (view 000001: the table's
     scattered holes close into a network that encloses a wide patch of the table, score 0.22,
     and take in the container's readings)."""
+    best = _moved_scores(realdata.parent / "tracebot-dev", 0, 1)
+    assert len(best) == 8
+    assert min(best) >= 0.5 and np.mean(best) >= 0.73
+
+
+@pytest.mark.slow
+def test_the_cleargrasp_frames_moved_down_by_a_pixel(realdata):
+    """ClearGrasp's D435 frames 080 and 123 moved one pixel down (the first row repeated, K's
+    principal point moved with them). Measured: 6 of their 7 objects found, mean best IoU
+    0.61; with the instances keeping what lies within 8 px of the table's edge beside their
+    feet instead of 32 px, 2 of 7 and 0.41: 080's standing bottle keeps a band of dropouts
+    along the table's edge, and a piece of the lying bottle in front of it joins it as one
+    lying object (0.31 and 0.25); 123's second holder keeps a patch of the table's right
+    edge, which joins it the same way (0.22)."""
+    best = []
+    for folder in ("cleargrasp-more", "cleargrasp-real"):
+        best += _moved_scores(realdata.parent / folder, 1, 0, only="d435")
+    assert len(best) == 7
+    assert sum(v >= 0.5 for v in best) >= 6 and np.mean(best) >= 0.58
+
+
+def _moved_scores(root, down: int, right: int, only: str = "") -> list[float]:
+    """Best IoU of each true object in the real frames below ``root`` (those whose key holds
+    ``only``) moved ``down`` and ``right`` pixels, the first rows and columns repeated and K's
+    principal point moved with them: the segmenter's 2x2 reduction of a 1280 px frame then
+    keeps another reading of each block."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
     def moved(a: np.ndarray) -> np.ndarray:
-        return np.pad(a, ((0, 0), (1, 0)) + ((0, 0),) * (a.ndim - 2), mode="edge")[:, :a.shape[1]]
+        pad = ((down, 0), (right, 0)) + ((0, 0),) * (a.ndim - 2)
+        return np.pad(a, pad, mode="edge")[:a.shape[0], :a.shape[1]]
 
     segmenter = Segmenter(SegmentConfig(), PlaneConfig())
     best = []
-    for source in discover_scenes(realdata.parent / "tracebot-dev", IOConfig(), None):
+    for source in discover_scenes(root, IOConfig(), None):
         for fid in source.frame_ids():
+            if only not in source.frame_key(fid):
+                continue
             frame = source.load_frame(fid)
             truth = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
             K = frame.camera.K.astype(np.float64).copy()
-            K[0, 2] += 1
+            K[0, 2] += right
+            K[1, 2] += down
             inst = segmenter(fid, moved(frame.rgb), moved(frame.depth_m), K)
             best += list(instance_ious(inst.ids, moved(truth)).values())
-    assert len(best) == 8
-    assert min(best) >= 0.5 and np.mean(best) >= 0.73
+    return best
 
 
 def test_fill_holes_in_the_box_fills_what_scipy_fills():

@@ -81,6 +81,11 @@ SHADOW_MIN_STEP, SHADOW_MIN_EDGES, SHADOW_SIGNATURE = 4.0, 20, 0.8  # casts_ster
 TABLE_EDGE_BAND, TABLE_EDGE_SHARE = 8, 0.5  # an instance with over this share of its pixels
 # within this many px of the table footprint's edge is a band of dropouts along it (measured on
 # the shared real frames: the far edge's bands 0.59-0.77, objects at most 0.20)
+TABLE_EDGE_TRIM = 32  # px from the table footprint's edge within which an instance keeps only
+# the columns above its feet in a stereo camera's frame: the dropouts along the edge spread
+# that far on the shared real frames once the 2x2 reduction keeps another reading of each
+# block, and join an object near the edge (a container beside its top, a bottle or a holder
+# beside it); elsewhere TABLE_EDGE_BAND
 MIN_IMAGE_SHARE = 0.001  # least share of the image an instance covers (400 px at 848x480): the
 # clusters of dropouts a real stereo camera scatters over a plain table are smaller
 OPAQUE_COLOUR = 3.5  # median colour departure from the table around it (table_colour_departure)
@@ -756,6 +761,8 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     # the room
     edge = along_table_edge(footprint, TABLE_EDGE_BAND)
     over_table = footprint & ~edge
+    off_edge = footprint & ~along_table_edge(footprint, TABLE_EDGE_TRIM) if ev.stereo else \
+        over_table
     fits = _PartFits(K, plane, depth_m)  # every revolution fit of the frame, made once
     for region in merge_pieces(pieces, depth_m.shape, radius=2 * close_radius):
         # beyond the table a region keeps only the columns its part over the table spans
@@ -804,10 +811,11 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     # table meets the room, is none: one lying mostly along the edge (with what lies beyond
     # the table above its whole span) is dropped, and beyond the table or along its edge the
     # others keep only the columns above their feet (the holes on the table beside a glass
-    # at the far edge join the room's above them)
+    # at the far edge join the room's above them; the band a stereo camera leaves along the
+    # edge reaches TABLE_EDGE_TRIM into the table)
     masks = [within_table_columns(c.mask, over_table) for c in joined]
     keep = [i for i, m in enumerate(masks) if not m.any() or edge[m].mean() <= TABLE_EDGE_SHARE]
-    masks = [within_table_columns(masks[i], over_table, feet=FEET_SHARE) for i in keep]
+    masks = [within_table_columns(masks[i], off_edge, feet=FEET_SHARE) for i in keep]
     joined = [joined[i] for i in keep]
     masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height, fits) for m in masks]
     if ev.stereo:  # a stereo camera's holes and bumps beside a glass: within its outline
