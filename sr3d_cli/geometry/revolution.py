@@ -73,16 +73,18 @@ def hull_sides(z: np.ndarray, r: np.ndarray) -> list[tuple[np.ndarray, np.ndarra
     are left out). z, r : (n,) profile points, any order, any units."""
     order = np.lexsort((r, z))
     pts = np.column_stack([z, r])[order]
-    pts = np.vstack([[pts[0, 0], 0.0], pts, [pts[-1, 0], 0.0]])
-    upper = [pts[0]]  # upper hull in (z, r), left to right (monotone chain)
-    for p in pts[1:]:
+    pts = np.vstack([[pts[0, 0], 0.0], pts, [pts[-1, 0], 0.0]])  # (n + 2, 2) float64
+    zr = pts.tolist()  # the same values as Python floats: the chain's arithmetic is per point
+    upper = [0]  # rows of pts on the upper hull in (z, r), left to right (monotone chain)
+    for k in range(1, len(zr)):
+        pz, pr = zr[k]
         while len(upper) >= 2:
-            u, v = upper[-1] - upper[-2], p - upper[-2]
-            if u[0] * v[1] - u[1] * v[0] < 0:  # a right turn: upper[-1] stays on the hull
+            (az, ar), (bz, br) = zr[upper[-2]], zr[upper[-1]]
+            if (bz - az) * (pr - ar) - (br - ar) * (pz - az) < 0:  # a right turn: b stays
                 break
             upper.pop()
-        upper.append(p)
-    return [(a, b) for a, b in zip(upper[:-1], upper[1:]) if b[0] - a[0] > 1e-12]
+        upper.append(k)
+    return [(pts[i], pts[j]) for i, j in zip(upper[:-1], upper[1:]) if zr[j][0] - zr[i][0] > 1e-12]
 
 
 def resting_edge(z: np.ndarray, r: np.ndarray, z_mass: float) -> tuple[np.ndarray, np.ndarray]:
@@ -148,31 +150,34 @@ def silhouette(centres: np.ndarray, axis: np.ndarray, radii: np.ndarray, K: np.n
     v = cross3(a, u.tolist())
     cos, sin = _ring_angles(n_theta)
     ring = u[:, None] * cos.T + v[:, None] * sin.T  # (3, T)
-    x, y, z = centres.T[:, :, None] + radii[:, None] * ring[:, None, :]  # (L, T) each
+    xyz = centres.T[:, :, None] + radii[:, None] * ring[:, None, :]  # (3, L, T)
+    z = xyz[2]
     x0, y0, w, h = window if window is not None else (0, 0, shape[1], shape[0])
     out = np.zeros((h, w), bool)
     scale = 4  # sub-pixel precision for cv2 (fixed point, 2 bits)
     zc = np.maximum(z, 1e-6)
-    fx = np.rint((x / zc * K[0, 0] + K[0, 2]) * scale).astype(np.int32)  # (L, T)
-    fy = np.rint((y / zc * K[1, 1] + K[1, 2]) * scale).astype(np.int32)
+    # (2, L, T): x then y, each (x / z * fx + cx) * 4 with K's (fx, fy) and (cx, cy) as (2, 1, 1)
+    f = np.rint((xyz[:2] / zc * np.diagonal(K)[:2, None, None] + K[:2, 2, None, None]) * scale
+                ).astype(np.int32)
     L, T = z.shape
     if z.size and z.min() > 0.01:  # every ring in front: the usual case
         drawn = None
-        ux, uy = fx, fy
+        used = f
     else:
         in_front = (z > 0.01).all(axis=1)
         drawn = np.flatnonzero(in_front[:-1] & in_front[1:])
         if not len(drawn):
             return out
-        ux, uy = fx[in_front], fy[in_front]  # every drawn ring among them
-    lx, ly = max(int(ux.min()) // scale - 1, 0), max(int(uy.min()) // scale - 1, 0)
-    hx = min(int(ux.max()) // scale + 2, shape[1])
-    hy = min(int(uy.max()) // scale + 2, shape[0])
+        used = f[:, in_front]  # every drawn ring among them
+    (ux, uy), (vx, vy) = used.min(axis=(1, 2)).tolist(), used.max(axis=(1, 2)).tolist()
+    lx, ly = max(ux // scale - 1, 0), max(uy // scale - 1, 0)
+    hx = min(vx // scale + 2, shape[1])
+    hy = min(vy // scale + 2, shape[0])
     if hx <= lx or hy <= ly:
         return out
     pts = np.empty((L, T, 2), np.int32)  # in the box
-    np.subtract(fx, np.int32(scale * lx), out=pts[..., 0])
-    np.subtract(fy, np.int32(scale * ly), out=pts[..., 1])
+    np.subtract(f, np.array([scale * lx, scale * ly], np.int32)[:, None, None],
+                out=pts.transpose(2, 0, 1))
     # (L - 1, 2T, 2): frustum k's two rings, k's then k + 1's, a view of consecutive rings
     pairs = np.ndarray((L - 1, 2 * T, 2), np.int32, pts, 0, (8 * T, 8, 4))
     img = out.view(np.uint8)  # cv2 draws 1s into the bool array's bytes

@@ -17,6 +17,8 @@ fitted metric pose, kept as a hint for ``align``.
 
 from __future__ import annotations
 
+import functools
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -76,8 +78,32 @@ class _Model:
     radii: np.ndarray  # (L,) metres at z_k = height * k / (L - 1)
 
     def centres(self) -> np.ndarray:
-        z = np.linspace(0, self.height, len(self.radii))
+        z = _linspace_to(self.height, len(self.radii))
         return self.base + z[:, None] * self.axis
+
+
+@functools.lru_cache(maxsize=8)
+def _steps(n: int) -> np.ndarray:
+    """``np.arange(n)`` (n,) float64, read-only: shared by every :func:`_linspace_to` of
+    ``n`` values."""
+    out = np.arange(0, n, dtype=np.float64)
+    out.flags.writeable = False
+    return out
+
+
+def _linspace_to(stop: float, n: int) -> np.ndarray:
+    """``np.linspace(0, stop, n)`` (n,), the same values bit for bit: ``k * (stop / (n - 1))``
+    with the last set to ``stop``, as NumPy works them out, without its argument handling
+    (most of its cost on a few values). Other cases (``n < 2``, a step that is not positive,
+    ``stop`` not a float) go to NumPy."""
+    if n < 2 or not isinstance(stop, float):
+        return np.linspace(0, stop, n)
+    step = stop / (n - 1)
+    if not step > 0:
+        return np.linspace(0, stop, n)
+    z = _steps(n) * step
+    z[-1] = stop
+    return z
 
 
 def _ray(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
@@ -116,7 +142,9 @@ class _Frame:
         """The window whose vertical is ``model``'s projected axis, centred between its ends
         (``box``: see :meth:`__init__`)."""
         c0, c1 = project(np.stack([model.base, model.base + model.height * model.axis]), K)
-        up = unit(c1 - c0) if np.linalg.norm(c1 - c0) > 1e-6 else np.array([0.0, -1.0])
+        d = c1 - c0
+        length = np.linalg.norm(d)
+        up = d / length if length > 1e-6 else np.array([0.0, -1.0])  # unit(d), one norm
         return cls(mask, (c0 + c1) / 2, up, pad=8, occluders=occluders, box=box)
 
     def seen(self, ren: np.ndarray) -> np.ndarray:
@@ -129,8 +157,13 @@ class _Frame:
         return mask_iou(self.obs, ren, self.occluders)
 
     def warp(self, window: np.ndarray) -> np.ndarray:
-        return cv2.warpAffine(window.astype(np.uint8), self.M, (self.size, self.size),
-                              flags=cv2.INTER_NEAREST) > 0
+        """``window`` (h, w), set where nonzero, rotated into this frame: (size, size) bool.
+        A bool window is warped through its uint8 view (0 and 1), and nearest-pixel sampling
+        with a zero border gives back only those values, read again as bool: no copies."""
+        if window.dtype != bool:
+            window = window.astype(np.uint8) != 0
+        return cv2.warpAffine(window.view(np.uint8), self.M, (self.size, self.size),
+                              flags=cv2.INTER_NEAREST).view(bool)
 
     def draw(self, model: "_Model", K: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         """The model's silhouette in the image ``shape``, as seen in this window."""
@@ -163,12 +196,18 @@ def _pixels(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _extent(mask: np.ndarray, top_share: float = 0.0) -> tuple[float, float, float]:
     """(top row, bottom row, mean column) of a rotated mask; with ``top_share``, the top row
     is the first one at least that share of the widest row wide."""
-    widths = _counts(mask, 1)
+    return _extent_of(_counts(mask, 1), _counts(mask, 0), top_share)
+
+
+def _extent_of(widths: np.ndarray, columns: np.ndarray,
+               top_share: float = 0.0) -> tuple[float, float, float]:
+    """:func:`_extent` of a mask from its set pixels per row ``widths`` (h,) and per column
+    ``columns`` (w,) (:func:`_counts`, int64), where they are counted already."""
     rows = np.nonzero(widths)[0]
     top = rows[0] if top_share <= 0 else np.nonzero(widths >= top_share * widths.max())[0][0]
     # the mean column from the columns' counts: integer sums, so exactly the mean of the
     # pixels' columns
-    column_sum = int(_counts(mask, 0) @ np.arange(mask.shape[1]))
+    column_sum = int(columns @ np.arange(len(columns)))
     return float(top), float(rows[-1]), float(column_sum) / int(widths.sum())
 
 
@@ -186,20 +225,66 @@ def _metres(gap_px: float, moved_px: float, eps: float) -> float:
     return gap_px / (moved_px / eps) if abs(moved_px) > 1e-9 else 0.0
 
 
-def _orientation(mask: np.ndarray) -> float:
+def _orientation(mask: np.ndarray, box: tuple[int, int, int, int]) -> float:
     """Angle (radians, from the window's vertical, clockwise positive) of the major axis of a
-    mask (h, w) bool."""
-    m = cv2.moments(mask.view(np.uint8), binaryImage=True)  # central moments: sums over pixels
-    if m["m00"] < 3:
+    mask (h, w) bool whose set pixels lie in ``box`` (x, y, w, h)."""
+    mu20, mu11, mu02 = _central_moments(mask, box)
+    if mu20 is None:
         return 0.0
-    angle = 0.5 * np.arctan2(2 * m["mu11"], m["mu20"] - m["mu02"])  # from +x
+    angle = 0.5 * np.arctan2(2 * mu11, mu20 - mu02)  # from +x
     return float(angle + np.pi / 2 if angle < 0 else angle - np.pi / 2)
+
+
+def _central_moments(mask: np.ndarray, box: tuple[int, int, int, int]
+                     ) -> tuple[float | None, float | None, float | None]:
+    """(mu20, mu11, mu02) of a mask (h, w) bool whose set pixels lie in ``box`` (x, y, w, h),
+    the values ``cv2.moments`` gives for the whole mask, bit for bit; all None with fewer than
+    3 set pixels. cv2 sums over the box only (the rotated window is mostly empty); the raw
+    moments, whole numbers, are moved to the window's origin exactly in integers, and the
+    central ones then worked out as cv2 does (``mu20 = m20 - m10 * cx`` with
+    ``cx = m10 * (1 / m00)``)."""
+    x, y, w, h = box
+    m = cv2.moments(mask.view(np.uint8)[y:y + h, x:x + w], binaryImage=True)
+    m00 = int(m["m00"])
+    if m00 < 3:
+        return None, None, None
+    m10, m01 = int(m["m10"]), int(m["m01"])
+    m20, m11, m02 = int(m["m20"]), int(m["m11"]), int(m["m02"])
+    # the raw moments about the window's origin: x -> x + x0, y -> y + y0 in each sum
+    m20 += 2 * x * m10 + x * x * m00
+    m11 += x * m01 + y * m10 + x * y * m00
+    m02 += 2 * y * m01 + y * y * m00
+    m10 += x * m00
+    m01 += y * m00
+    inv = 1.0 / m00
+    cx, cy = m10 * inv, m01 * inv
+    return float(m20) - m10 * cx, float(m11) - m10 * cy, float(m02) - m01 * cy
+
+
+def _box_of(widths: np.ndarray, columns: np.ndarray) -> tuple[int, int, int, int]:
+    """(x, y, w, h): the box of a mask's set pixels from their counts per row ``widths`` (h,)
+    and per column ``columns`` (w,) (:func:`_counts`); at least one must be set."""
+    rows, cols = np.flatnonzero(widths), np.flatnonzero(columns)
+    return (int(cols[0]), int(rows[0]), int(cols[-1] - cols[0]) + 1,
+            int(rows[-1] - rows[0]) + 1)
 
 
 def _widths(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """Width (pixels) of the mask on each of ``rows`` (clipped, rounded)."""
-    r = np.clip(np.rint(rows).astype(int), 0, mask.shape[0] - 1)
-    return _counts(mask, 1)[r].astype(np.float64)
+    return _widths_of(_counts(mask, 1), rows)
+
+
+def _widths_of(widths: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """:func:`_widths` of a mask from its set pixels per row ``widths`` (h,) (:func:`_counts`)."""
+    r = _clip(np.rint(rows).astype(int), 0, len(widths) - 1)
+    return widths[r].astype(np.float64)
+
+
+def _clip(a, lo, hi):
+    """``np.clip(a, lo, hi)``, the same values (``hi`` None: no upper bound), by the two ufuncs
+    it applies: its argument handling costs more than the work on a few values."""
+    a = np.maximum(a, lo)
+    return a if hi is None else np.minimum(a, hi)
 
 
 def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: str,
@@ -214,6 +299,8 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
     pixels (see :class:`_Frame`) the mask takes whatever the model draws."""
     n = plane.normal
     box = _box(mask, occluders)
+    # a lying axis's trial turn about the normal (0.05 rad), to see how its image turns
+    probe = rotation_about(n, 0.05) if resting == "lying" and turn else None
     for it in range(iterations + 1):
         frame = _Frame.along(model, mask, K, occluders, box)
         ren = frame.draw(model, K, mask.shape)
@@ -225,14 +312,18 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             # only as far as its diagonal reaches: a model drawn far from a small mask can
             # leave none of it there, and then no gap to close
             break
+        # set pixels per row and per column of each, read by the width update, the extents
+        # and the orientations
+        obs_widths, obs_columns = _counts(obs, 1), _counts(obs, 0)
+        ren_widths, ren_columns = _counts(ren, 1), _counts(ren, 0)
         if not keep_radii:
             rows = frame.point(project(model.centres(), K))[:, 1]
-            ratio = (_widths(obs, rows) + 0.5) / (_widths(ren, rows) + 0.5)
-            model.radii = np.clip(model.radii * np.clip(ratio, 0.7, 1.4) ** 0.8,
-                                  0.002 * model.height, None)
+            ratio = (_widths_of(obs_widths, rows) + 0.5) / (_widths_of(ren_widths, rows) + 0.5)
+            model.radii = _clip(model.radii * _clip(ratio, 0.7, 1.4) ** 0.8,
+                                0.002 * model.height, None)
         share = TOP_SHARE if keep_radii else 0.0
-        t_obs, b_obs, x_obs = _extent(obs, share)
-        t_ren, b_ren, x_ren = _extent(ren, share)
+        t_obs, b_obs, x_obs = _extent_of(obs_widths, obs_columns, share)
+        t_ren, b_ren, x_ren = _extent_of(ren_widths, ren_columns, share)
         eps = 0.005
         # pixels moved in the window per metre of each parameter (finite differences): the
         # base and the top, then the top moved along the axis and the base moved two ways
@@ -247,7 +338,7 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             dh = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
             db = _metres(b_obs - b_ren, a_away[1] - a0[1], eps)
             ds = _metres(x_obs - x_ren, a_side[0] - a0[0], eps)
-            step = np.clip(0.8 * np.array([dh, db, ds]), -0.5 * model.height, 0.5 * model.height)
+            step = _clip(0.8 * np.array([dh, db, ds]), -0.5 * model.height, 0.5 * model.height)
             model.base = model.base + step[1] * away + step[2] * side
             model.height = max(model.height + step[0], 1e-3)
         else:
@@ -259,19 +350,20 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             dt = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
             db = _metres(b_obs - b_ren, a_b[1] - a0[1], eps)
             ds = _metres(x_obs - x_ren, a_side[0] - a0[0], eps)
-            step = np.clip(0.8 * np.array([dt, db, ds]), -0.5 * model.height, 0.5 * model.height)
+            step = _clip(0.8 * np.array([dt, db, ds]), -0.5 * model.height, 0.5 * model.height)
             model.base = model.base - step[1] * model.axis + step[2] * side
             model.height = max(model.height + step[0] + step[1], 1e-3)
             # turn the axis in the plane until the silhouette's orientation matches
-            d_img = _orientation(obs) - _orientation(ren)
-            if turn and abs(d_img) > 1e-3:
-                turned = rotation_about(n, 0.05) @ model.axis
+            d_img = (_orientation(obs, _box_of(obs_widths, obs_columns))
+                     - _orientation(ren, _box_of(ren_widths, ren_columns))) if turn else 0.0
+            if abs(d_img) > 1e-3:
+                turned = probe @ model.axis
                 tip = model.base + model.height * turned
                 p = frame.point(project(np.stack([model.base, tip]), K))
                 gain = (np.arctan2(p[1, 0] - p[0, 0], p[0, 1] - p[1, 1])) / 0.05
                 if abs(gain) > 1e-3:
                     mid = model.base + 0.5 * model.height * model.axis
-                    model.axis = rotation_about(n, float(np.clip(0.8 * d_img / gain, -0.3, 0.3))
+                    model.axis = rotation_about(n, float(_clip(0.8 * d_img / gain, -0.3, 0.3))
                                                 ) @ model.axis
                     model.base = mid - 0.5 * model.height * model.axis
             if tilt:
@@ -384,7 +476,7 @@ def _rest_on_hull(model: _Model, plane: Plane) -> None:
     table as :func:`_resting_tilt` says."""
     n = plane.normal
     flat = unit(plane.project_direction(model.axis))
-    theta, h0 = _resting_tilt(np.linspace(0, model.height, len(model.radii)), model.radii)
+    theta, h0 = _resting_tilt(_linspace_to(model.height, len(model.radii)), model.radii)
     mid = model.base + 0.5 * model.height * model.axis
     model.axis = np.cos(theta) * flat + np.sin(theta) * n
     base = mid - 0.5 * model.height * model.axis
@@ -721,7 +813,25 @@ def _envelope(z: np.ndarray, r: np.ndarray, levels: np.ndarray, band: float,
     order = np.argsort(-z)  # highest first: the readings at or above a level are a prefix
     zs, rs = z[order], r[order]
     n = np.searchsorted(-zs, -(levels - 0.5 * band), side="right")
-    return np.array([np.percentile(rs[:max(k, min(floor, len(rs)))], 90) for k in n])
+    counts = [max(int(k), min(floor, len(rs))) for k in n]
+    if not counts or min(counts) < 1 or rs.dtype != np.float64 or np.isnan(rs).any():
+        return np.array([np.percentile(rs[:k], 90) for k in counts])
+    return np.array([_percentile_90(np.sort(rs[:k])) for k in counts])
+
+
+def _percentile_90(ordered: np.ndarray) -> float:
+    """``np.percentile(values, 90)`` of values (m,) float64 (m >= 1, no NaN) given sorted, the
+    same value bit for bit: the index ``(m - 1) * 0.9`` falls ``t`` of the way from one value
+    to the next, and the two are interpolated as NumPy does (from the upper one where ``t``
+    is at least a half); at the last value (m = 1) both are it. NumPy's argument handling
+    costs most of its time on a few hundred values."""
+    m = len(ordered)
+    at = (m - 1) * 0.9
+    below = math.floor(at) if at < m - 1 else -1
+    above = below + 1 if at < m - 1 else -1
+    t = at - below
+    a, b = float(ordered[below]), float(ordered[above])
+    return b - (b - a) * (1 - t) if t >= 0.5 else a + (b - a) * t
 
 
 def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray, levels: int,
