@@ -11,6 +11,7 @@ from sr3d_cli.io.atomic import write_json, write_png
 from sr3d_cli.io.images import write_depth
 
 REALDATA = Path(__file__).resolve().parents[1].parent / "shared" / "realdata" / "cleargrasp-real"
+EXTSIM = Path(__file__).resolve().parents[1].parent / "shared" / "extsim"
 
 K_SMALL = [[50.0, 0.0, 15.5], [0.0, 50.0, 11.5], [0.0, 0.0, 1.0]]
 
@@ -51,6 +52,14 @@ def realdata() -> Path:
     if not REALDATA.is_dir():
         pytest.skip(f"shared real frames not present at {REALDATA} (they live outside the repo)")
     return REALDATA
+
+
+@pytest.fixture
+def extsim() -> Path:
+    if not EXTSIM.is_dir():
+        pytest.skip(f"the independent renderer's frames not present at {EXTSIM} (they live "
+                    f"outside the repo)")
+    return EXTSIM
 
 
 @pytest.fixture(scope="package")

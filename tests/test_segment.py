@@ -872,18 +872,29 @@ def _far_edge_scene(band_columns: tuple[int, int], glass_at: tuple[int, int, int
 
 def test_a_band_of_dropouts_along_the_tables_far_edge_is_no_object(monkeypatch):
     """Where the table ends against the room, a stereo camera often leaves a ragged band of
-    holes along the edge: it is no object (over half its pixels lie within
-    TABLE_EDGE_BAND px of the table footprint's edge); a glass on the table still is. Without
-    the rule the band comes out as an instance."""
+    holes along the edge: it is no object, twice over: it shows no outline over the table
+    (the room's colour beyond the edge does not count) and over half its pixels lie within
+    TABLE_EDGE_BAND px of the table footprint's edge; a glass on the table still is. Without
+    both rules the band comes out as an instance; with either one, it does not."""
     from sr3d_cli.segment import training_free
 
     K, plane, depth, rgb, band, glass = _far_edge_scene((40, 140), (200, 150, 30, 45))
     (mask,) = _segmented_masks(K, plane, depth, rgb)
     assert (mask & glass).sum() / (mask | glass).sum() > 0.9
+
+    def on_band():
+        return [m for m in _segmented_masks(K, plane, depth, rgb)
+                if (m & band).sum() > 0.5 * m.sum()]
+
+    shows = training_free.shows_outline
+    monkeypatch.setattr(training_free, "shows_outline",
+                        lambda mask, departure, within=None: shows(mask, departure))
+    assert on_band() == []
     monkeypatch.setattr(training_free, "TABLE_EDGE_SHARE", 1.0)
-    on_band = [m for m in _segmented_masks(K, plane, depth, rgb)
-               if (m & band).sum() > 0.5 * m.sum()]
-    assert len(on_band) == 1 and (on_band[0] & band).sum() > 0.5 * band.sum()
+    found = on_band()
+    assert len(found) == 1 and (found[0] & band).sum() > 0.5 * band.sum()
+    monkeypatch.setattr(training_free, "shows_outline", shows)
+    assert on_band() == []
 
 
 def test_a_glass_whose_top_meets_the_band_along_the_far_edge_keeps_only_its_columns(

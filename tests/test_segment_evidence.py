@@ -248,6 +248,23 @@ def test_a_bodys_mask_leaves_the_tables_bumps_beside_it(monkeypatch):
     assert instance_ious(loose.ids, ids)[1] < 0.95 and (loose.ids > 0)[bumps].mean() > 0.25
 
 
+def test_an_outline_is_read_where_it_is_allowed_to_show():
+    """A patch of dropouts on a plain table just below the table's far edge, where the colour
+    departs along the whole edge: counted in full, its band shows that edge as an outline;
+    read over the table only it shows none. A glass's own rim over the table still shows."""
+    departure = np.zeros((60, 80), np.float32)
+    departure[:15] = 10.0  # the room beyond the table's far edge
+    over_table = np.zeros((60, 80), bool)
+    over_table[15:] = True
+    patch = np.zeros((60, 80), bool)
+    patch[16:30, 20:40] = True  # its band reaches 3 px up, past the edge
+    assert tf.shows_outline(patch, departure)
+    assert not tf.shows_outline(patch, departure, over_table)
+    rimmed = departure.copy()
+    rimmed[30:33, 20:40] = 4.0  # a bright rim along the patch's lower side
+    assert tf.shows_outline(patch, rimmed, over_table)
+
+
 def test_an_instance_is_cut_to_its_outlines_hull_keeping_its_own_colour_and_readings():
     """A glass (ellipse) whose rim shows in colour, with a plain band of holes joined to its
     side (a stereo camera's shadow the step model misses): the cut keeps the glass and what is
@@ -508,7 +525,7 @@ def test_a_body_whose_join_splits_is_kept_beside_the_instance_where_it_is_a_body
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.754, 16 of 16 objects at IoU >= 0.5 (two at 0.53 and 0.56), false
+    per true object mean 0.755, 16 of 16 objects at IoU >= 0.5 (two at 0.53 and 0.56), false
     instances (>= 300 px, IoU < 0.2 with every object) 0.09 per frame; with a region's part
     beyond the table kept while its cuts are judged (ClearGrasp 123's third holder lost with
     the wall's holes and the table they close in: 0.53 -> 0.22) 0.731 and 15; without the
@@ -571,6 +588,35 @@ def test_the_cleargrasp_frames_moved_down_by_a_pixel(realdata):
         best += _moved_scores(realdata.parent / folder, 1, 0, only="d435")
     assert len(best) == 7
     assert sum(v >= 0.5 for v in best) >= 6 and np.mean(best) >= 0.58
+
+
+@pytest.mark.slow
+def test_the_cleargrasp_holders_moved_right_by_a_pixel(realdata):
+    """ClearGrasp's D435 frame 123 moved one pixel right. Measured: the first two of its three
+    holders found (0.85 and 0.84; the third, half its region on the table, is lost: 0.0); with
+    the instances grown to the outline beyond the table's footprint too, the second holder's
+    instance takes the room's colour edge above it and its body no longer joins it (0.30)."""
+    best = _moved_scores(realdata, 0, 1, only="d435")
+    assert len(best) == 3
+    assert sum(v >= 0.5 for v in best) >= 2 and np.mean(best) >= 0.55
+
+
+@pytest.mark.slow
+def test_a_pitcher_near_the_tables_far_edge_keeps_to_its_outline(extsim):
+    """extsim scene 9: a pitcher 2 cm in front of the table's far edge, where the room's colour
+    departs from the table's along the whole edge. Measured: best IoU 0.85; grown to the
+    outline beyond the table's footprint too, the instance joins the room's edge and takes
+    the table between (0.77)."""
+    from sr3d_cli.config import IOConfig
+    from sr3d_cli.io.formats import discover_scenes
+
+    source = next(s for s in discover_scenes(extsim, IOConfig(), None) if s.name == "scene_0009")
+    fid = source.frame_ids()[0]
+    frame = source.load_frame(fid)
+    truth = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
+    inst = Segmenter(SegmentConfig(), PlaneConfig())(fid, frame.rgb, frame.depth_m,
+                                                     frame.camera.K)
+    assert list(instance_ious(inst.ids, truth).values())[0] >= 0.83
 
 
 def _moved_scores(root, down: int, right: int, only: str = "") -> list[float]:
