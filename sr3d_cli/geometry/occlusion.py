@@ -26,17 +26,27 @@ def down_direction(mask: np.ndarray, K: np.ndarray, plane: Plane) -> np.ndarray:
 
 
 def _lowest(mask: np.ndarray, down: np.ndarray) -> float:
-    ys, xs = np.nonzero(mask)
-    return float((xs * down[0] + ys * down[1]).max())
+    """How far ``down`` (2,) the image the set pixels of ``mask`` (H, W) bool reach: the most
+    of ``x * down[0] + y * down[1]``, over the pixels of the set pixels' box only."""
+    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
+    ys, xs = np.nonzero(mask[y:y + h, x:x + w])
+    return float(((xs + x) * down[0] + (ys + y) * down[1]).max())
 
 
 def in_front(other: np.ndarray, mask: np.ndarray, down: np.ndarray) -> bool:
     """Whether ``other``'s outline touches ``mask``'s (within :data:`TOUCH_PX`) and ends
-    :data:`NEARER_PX` further ``down`` the image: it stands in front and may hide part of it."""
+    :data:`NEARER_PX` further ``down`` the image: it stands in front and may hide part of it.
+    ``other``, ``mask``: (H, W) bool."""
     if not other.any() or not mask.any():
         return False
-    near = cv2.dilate(mask.astype(np.uint8), np.ones((2 * TOUCH_PX + 1,) * 2, np.uint8)) > 0
-    return bool((near & other).any()) and _lowest(other, down) > _lowest(mask, down) + NEARER_PX
+    # the mask's dilation lies within its set pixels' box widened by TOUCH_PX: dilated there
+    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
+    x0, y0 = max(x - TOUCH_PX, 0), max(y - TOUCH_PX, 0)
+    x1, y1 = min(x + w + TOUCH_PX, mask.shape[1]), min(y + h + TOUCH_PX, mask.shape[0])
+    near = cv2.dilate(mask[y0:y1, x0:x1].view(np.uint8),
+                      np.ones((2 * TOUCH_PX + 1,) * 2, np.uint8)) > 0
+    return bool((near & other[y0:y1, x0:x1]).any()) and \
+        _lowest(other, down) > _lowest(mask, down) + NEARER_PX
 
 
 OPAQUE_HEIGHT = 0.01  # metres above the table: readings there, off every instance, are a solid

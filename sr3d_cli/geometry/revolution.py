@@ -15,29 +15,49 @@ import cv2
 import numpy as np
 import trimesh
 
-from sr3d_cli.geometry.transforms import cross3
+from sr3d_cli.geometry.transforms import cross3, cross_rows
 
 
 def revolve(profile: np.ndarray, sections: int = 48) -> trimesh.Trimesh:
     """Revolve a ``(n, 2)`` (r, z) polyline about the z axis; both ends must have r == 0.
 
-    Returns a watertight mesh with outward normals.
+    Returns a watertight mesh with outward normals (:func:`revolved`'s vertices and faces).
     """
+    vertices, faces = revolved(profile, sections)
+    return trimesh.Trimesh(vertices, faces.copy(), process=False)
+
+
+def revolved(profile: np.ndarray, sections: int = 48) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices ``(V, 3)`` and faces ``(F, 3)`` (outward, read-only) of :func:`revolve`'s
+    mesh, without the mesh object (what a depth test of the solid reads)."""
     profile = np.asarray(profile, dtype=np.float64)
     if profile.ndim != 2 or profile.shape[1] != 2 or len(profile) < 3:
         raise ValueError("profile must be (n >= 3, 2)")
     if profile[0, 0] != 0 or profile[-1, 0] != 0 or np.any(profile[1:-1, 0] <= 0):
         raise ValueError("profile must start and end on the axis and stay off it in between")
     ring = profile[1:-1]
-    m = len(ring)
-    theta = np.linspace(0.0, 2 * np.pi, sections, endpoint=False)
+    cos, sin = _ring_angles(sections)
     ring_v = np.stack([
-        (ring[:, 0:1] * np.cos(theta)).ravel(),
-        (ring[:, 0:1] * np.sin(theta)).ravel(),
+        (ring[:, 0:1] * cos[:, 0]).ravel(),
+        (ring[:, 0:1] * sin[:, 0]).ravel(),
         np.repeat(ring[:, 1], sections),
     ], axis=1)
-    bottom, top = len(ring_v), len(ring_v) + 1
     vertices = np.vstack([ring_v, [[0, 0, profile[0, 1]]], [[0, 0, profile[-1, 1]]]])
+    faces = _revolved_faces(len(ring), sections)
+    # six times the signed volume (a tetrahedron from the origin per face): the sign is all
+    # that is asked, and trimesh's mass properties cost twenty times more
+    tri = vertices[faces]
+    if np.einsum("ij,ij->", tri[:, 0], cross_rows(tri[:, 1], tri[:, 2])) < 0:
+        faces = faces[:, ::-1]  # each face turned round
+    return vertices, faces
+
+
+@functools.lru_cache(maxsize=8)
+def _revolved_faces(m: int, sections: int) -> np.ndarray:
+    """The faces ``(F, 3)`` int64 of a profile revolved with ``m`` points off the axis (the
+    rings' vertices first, ring by ring, then the base's and the top's centres), facing out
+    for a profile running up the axis; read-only, shared by every mesh of that size."""
+    bottom, top = m * sections, m * sections + 1
     j = np.arange(sections)
     jn = (j + 1) % sections
     i = np.arange(m - 1)[:, None] * sections  # (m - 1, 1): each ring band's first vertex
@@ -47,13 +67,8 @@ def revolve(profile: np.ndarray, sections: int = 48) -> trimesh.Trimesh:
     faces = np.vstack([np.stack([np.full(sections, bottom), jn, j], axis=1),
                        band.reshape(-1, 3),
                        np.stack([np.full(sections, top), last + j, last + jn], axis=1)])
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    # six times the signed volume (a tetrahedron from the origin per face): the sign is all
-    # that is asked, and trimesh's mass properties cost twenty times more
-    tri = vertices[faces]
-    if np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) < 0:
-        mesh.invert()
-    return mesh
+    faces.flags.writeable = False
+    return faces
 
 
 def open_vessel(outer: list, wall: float, base: float) -> np.ndarray:
@@ -110,7 +125,7 @@ def resting_edge(z: np.ndarray, r: np.ndarray, z_mass: float) -> tuple[np.ndarra
 @functools.lru_cache(maxsize=8)
 def _ring_angles(n_theta: int) -> tuple[np.ndarray, np.ndarray]:
     """(cos, sin) ``(n_theta, 1)`` each of ``n_theta`` angles evenly round a circle from 0;
-    read-only, shared by every silhouette drawn with that many."""
+    read-only, shared by every silhouette drawn and every profile revolved with that many."""
     theta = np.linspace(0, 2 * np.pi, n_theta, endpoint=False)
     out = np.cos(theta)[:, None], np.sin(theta)[:, None]
     for a in out:

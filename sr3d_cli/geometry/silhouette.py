@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from sr3d_cli.geometry.camera import unproject
-from sr3d_cli.geometry.transforms import place_points
+from sr3d_cli.geometry.transforms import cross_rows, place_points
 
 
 SUBPIXEL = 4  # vertex positions are rounded to quarter pixels (cv2's ``shift=2``)
@@ -274,7 +274,7 @@ def surface_depth(uv: np.ndarray, pts: np.ndarray, faces: np.ndarray, K: np.ndar
     seen = seen_triangles(uv, pts[:, 2], faces, shape, xs, ys)
     hit = seen >= 0
     a, b, c = (pts[faces[seen[hit]]][:, j] for j in range(3))
-    normal = np.cross(b - a, c - a)
+    normal = cross_rows(b - a, c - a)
     rays = unproject(np.column_stack([xs[hit], ys[hit]]), np.ones(int(hit.sum())), K)
     z = np.full(len(xs), np.nan)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -40,6 +40,17 @@ def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The cross products ``(n, 3)`` of the rows of ``a``, ``b`` ``(n, 3)`` float64, rounded
+    as ``np.cross`` rounds them (the same products and differences, into a C-ordered array)
+    at a third of its cost on a few thousand rows."""
+    out = np.empty((len(a), 3))
+    for k, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):
+        np.multiply(a[:, i], b[:, j], out=out[:, k])
+        out[:, k] -= a[:, j] * b[:, i]
+    return out
+
+
 def rotation_about(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotation matrix of ``angle`` radians about ``axis`` (Rodrigues)."""
     axis = np.asarray(axis, dtype=np.float64)

@@ -27,7 +27,7 @@ import numpy as np
 
 from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.revolution import hull_sides, revolve, silhouette
+from sr3d_cli.geometry.revolution import hull_sides, revolved, silhouette
 from sr3d_cli.geometry.silhouette import mask_iou, project_mesh, surface_depth
 from sr3d_cli.geometry.transforms import cross3, make_T, perpendiculars, rotation_about, unit
 
@@ -65,9 +65,9 @@ class RevolutionFit:
     def T_cam_obj(self) -> np.ndarray:
         z = self.axis / np.linalg.norm(self.axis)
         helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
-        x = np.cross(helper, z)
+        x = cross3(helper, z)
         x /= np.linalg.norm(x)
-        return make_T(np.stack([x, np.cross(z, x), z], axis=1), self.base)
+        return make_T(np.stack([x, cross3(z, x), z], axis=1), self.base)
 
 
 @dataclass
@@ -106,6 +106,18 @@ def _linspace_to(stop: float, n: int) -> np.ndarray:
     return z
 
 
+def _projected(points: list, K: np.ndarray) -> list:
+    """:func:`project` of a few camera-frame points (lists of three floats, metres): pixels
+    [(u, v), ...], the same values, worked out on Python floats (NumPy's cost per call is
+    most of it on a few points); NumPy's infinities where a point lies on the camera's
+    plane."""
+    fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+    try:
+        return [(x / z * fx + cx, y / z * fy + cy) for x, y, z in points]
+    except ZeroDivisionError:
+        return project(np.array(points, np.float64), K).tolist()
+
+
 def _ray(uv: np.ndarray, K: np.ndarray) -> np.ndarray:
     return np.array([(uv[0] - K[0, 2]) / K[0, 0], (uv[1] - K[1, 2]) / K[1, 1], 1.0])
 
@@ -114,38 +126,58 @@ class _Frame:
     """An image window around the mask, rotated so that the projected axis points up. Pixels
     ``occluders`` (H, W) bool, when given, are where objects in front may hide the one fitted:
     whatever a model draws there neither matches nor misses the mask (:meth:`seen`,
-    :meth:`iou`); the window then covers them too."""
+    :meth:`iou`); the window then covers them too. ``drawn``: the silhouette (size, size) bool
+    of the model the window was made with (:meth:`along`), where asked for, else None."""
 
     def __init__(self, mask: np.ndarray, centre_px: np.ndarray, up_px: np.ndarray, pad: int,
                  occluders: np.ndarray | None = None,
-                 box: tuple[int, int, int, int] | None = None):
+                 box: tuple[int, int, int, int] | None = None,
+                 solid: tuple["_Model", np.ndarray] | None = None):
         # box: (x, y, w, h) of the set pixels of the mask and the occluders (:func:`_box`),
-        # given where one fit makes many windows on the same mask
+        # given where one fit makes many windows on the same mask; solid: (model, K) of a
+        # model to draw in the window as it is made (:attr:`drawn`), warped with the mask
         bx, by, bw, bh = _box(mask, occluders) if box is None else box
-        self.x0, self.y0 = max(0, bx - pad), max(0, by - pad)
+        x0, y0 = self.x0, self.y0 = max(0, bx - pad), max(0, by - pad)
         x1, y1 = min(mask.shape[1], bx + bw + pad), min(mask.shape[0], by + bh + pad)
-        self.shape = (y1 - self.y0, x1 - self.x0)
+        self.shape = (y1 - y0, x1 - x0)
         angle = np.degrees(np.arctan2(up_px[0], -up_px[1]))  # rotate 'up' onto image -y
-        c = (float(centre_px[0] - self.x0), float(centre_px[1] - self.y0))
-        size = int(np.ceil(np.hypot(*self.shape))) + 2
+        c = (float(centre_px[0] - x0), float(centre_px[1] - y0))
+        # the window's diagonal, whole pixels (integer sides: the root of a whole number is
+        # one or lies far from one, so any hypot rounds it up alike)
+        size = math.ceil(math.hypot(*self.shape)) + 2
         self.M = cv2.getRotationMatrix2D(c, angle, 1.0)
-        self.M[:, 2] += (size / 2 - c[0], size / 2 - c[1])
+        self.M[0, 2] += size / 2 - c[0]
+        self.M[1, 2] += size / 2 - c[1]
         self.size = size
-        self.obs = self.warp(mask[self.y0:y1, self.x0:x1])
-        self.occluders = None if occluders is None else \
-            self.warp(occluders[self.y0:y1, self.x0:x1])
+        # :meth:`point`'s terms: the window's corner (2,), the rotation (2, 2) applied to
+        # rows and the shift (2,)
+        self._corner = np.array([x0, y0], np.float64)
+        self._turn, self._shift = self.M[:, :2].T, self.M[:, 2]
+        windows = [mask[y0:y1, x0:x1]]
+        if occluders is not None:
+            windows.append(occluders[y0:y1, x0:x1])
+        if solid is not None:
+            windows.append(self._silhouette(*solid, mask.shape))
+        warped = self._warp_all(windows)
+        self.obs = warped[0]
+        self.occluders = None if occluders is None else warped[1]
+        self.drawn = None if solid is None else warped[-1]
 
     @classmethod
     def along(cls, model: "_Model", mask: np.ndarray, K: np.ndarray,
               occluders: np.ndarray | None = None,
-              box: tuple[int, int, int, int] | None = None) -> "_Frame":
+              box: tuple[int, int, int, int] | None = None, drawn: bool = False) -> "_Frame":
         """The window whose vertical is ``model``'s projected axis, centred between its ends
-        (``box``: see :meth:`__init__`)."""
-        c0, c1 = project(np.stack([model.base, model.base + model.height * model.axis]), K)
-        d = c1 - c0
-        length = np.linalg.norm(d)
+        (``box``: see :meth:`__init__`); with ``drawn``, ``model`` drawn in it
+        (:attr:`drawn`, as :meth:`draw` draws it)."""
+        base = model.base.tolist()
+        (u0, v0), (u1, v1) = _projected([base, _moved(base, model.height,
+                                                      model.axis.tolist())], K)
+        d = np.array([u1 - u0, v1 - v0])
+        length = math.sqrt(d.dot(d))  # np.linalg.norm(d): the same sum
         up = d / length if length > 1e-6 else np.array([0.0, -1.0])  # unit(d), one norm
-        return cls(mask, (c0 + c1) / 2, up, pad=8, occluders=occluders, box=box)
+        return cls(mask, ((u0 + u1) / 2, (v0 + v1) / 2), up, pad=8, occluders=occluders,
+                   box=box, solid=(model, K) if drawn else None)
 
     def seen(self, ren: np.ndarray) -> np.ndarray:
         """The mask as a drawn silhouette ``ren`` should match it: what ``ren`` puts on the
@@ -160,20 +192,47 @@ class _Frame:
         """``window`` (h, w), set where nonzero, rotated into this frame: (size, size) bool.
         A bool window is warped through its uint8 view (0 and 1), and nearest-pixel sampling
         with a zero border gives back only those values, read again as bool: no copies."""
-        if window.dtype != bool:
-            window = window.astype(np.uint8) != 0
-        return cv2.warpAffine(window.view(np.uint8), self.M, (self.size, self.size),
-                              flags=cv2.INTER_NEAREST).view(bool)
+        return self._warped(_set(window).view(np.uint8)).view(bool)
+
+    def _warp_all(self, windows: list[np.ndarray]) -> list[np.ndarray]:
+        """:meth:`warp` of each of ``windows`` (at most eight), the same pixels, in one warp:
+        nearest-pixel sampling takes each pixel whole from one place (or the zero border), so
+        window k goes as bit k of one uint8 image and comes back as that bit (the top one as
+        the values at least its weight)."""
+        if len(windows) == 1:
+            return [self.warp(windows[0])]
+        bits = [_set(window).view(np.uint8) for window in windows]
+        top = len(bits) - 1
+        packed = bits[top] * np.uint8(1 << top)
+        for k, bit in enumerate(bits[:top]):
+            packed |= bit * np.uint8(1 << k) if k else bit
+        warped = self._warped(packed)
+        return [(warped & 1).view(bool)] + [(warped & (1 << k)) != 0 for k in range(1, top)] \
+            + [warped >= 1 << top]
+
+    def _warped(self, window: np.ndarray) -> np.ndarray:
+        """``window`` (h, w) uint8 rotated into this frame, nearest-pixel: (size, size) uint8."""
+        return cv2.warpAffine(window, self.M, (self.size, self.size), flags=cv2.INTER_NEAREST)
 
     def draw(self, model: "_Model", K: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         """The model's silhouette in the image ``shape``, as seen in this window."""
+        return self.warp(self._silhouette(model, K, shape))
+
+    def _silhouette(self, model: "_Model", K: np.ndarray, shape: tuple[int, int]
+                    ) -> np.ndarray:
+        """The model's silhouette (h, w) bool in the unrotated window of the image ``shape``."""
         window = (self.x0, self.y0, self.shape[1], self.shape[0])
-        return self.warp(silhouette(model.centres(), model.axis, model.radii, K, shape, window))
+        return silhouette(model.centres(), model.axis, model.radii, K, shape, window)
 
     def point(self, uv: np.ndarray) -> np.ndarray:
         """Image pixel(s) (n, 2) to rotated-window coordinates (n, 2)."""
-        uv = np.atleast_2d(uv) - [self.x0, self.y0]
-        return uv @ self.M[:, :2].T + self.M[:, 2]
+        return (np.atleast_2d(uv) - self._corner) @ self._turn + self._shift
+
+
+def _set(window: np.ndarray) -> np.ndarray:
+    """``window`` (h, w) as bool: set where its value as a uint8 is nonzero; a bool window as
+    it is."""
+    return window if window.dtype == bool else window.astype(np.uint8) != 0
 
 
 def _box(mask: np.ndarray, occluders: np.ndarray | None = None) -> tuple[int, int, int, int]:
@@ -219,6 +278,12 @@ def _counts(mask: np.ndarray, axis: int) -> np.ndarray:
                       ).ravel().astype(np.int64)
 
 
+def _moved(point: list, length: float, direction: list) -> list:
+    """``point + length * direction`` of two 3-vectors given as lists of floats, the same
+    values as NumPy's."""
+    return [p + length * d for p, d in zip(point, direction)]
+
+
 def _metres(gap_px: float, moved_px: float, eps: float) -> float:
     """Metres to move a parameter so that a feature that moved ``moved_px`` pixels for ``eps``
     metres closes a ``gap_px`` pixel gap (0 when the parameter does not move it)."""
@@ -239,12 +304,13 @@ def _central_moments(mask: np.ndarray, box: tuple[int, int, int, int]
                      ) -> tuple[float | None, float | None, float | None]:
     """(mu20, mu11, mu02) of a mask (h, w) bool whose set pixels lie in ``box`` (x, y, w, h),
     the values ``cv2.moments`` gives for the whole mask, bit for bit; all None with fewer than
-    3 set pixels. cv2 sums over the box only (the rotated window is mostly empty); the raw
-    moments, whole numbers, are moved to the window's origin exactly in integers, and the
-    central ones then worked out as cv2 does (``mu20 = m20 - m10 * cx`` with
+    3 set pixels. cv2 sums over the box only (the rotated window is mostly empty), the bool
+    view's 0s and 1s as they are (its binary mode gives the same raw sums in twice the time);
+    the raw moments, whole numbers, are moved to the window's origin exactly in integers, and
+    the central ones then worked out as cv2 does (``mu20 = m20 - m10 * cx`` with
     ``cx = m10 * (1 / m00)``)."""
     x, y, w, h = box
-    m = cv2.moments(mask.view(np.uint8)[y:y + h, x:x + w], binaryImage=True)
+    m = cv2.moments(mask.view(np.uint8)[y:y + h, x:x + w])
     m00 = int(m["m00"])
     if m00 < 3:
         return None, None, None
@@ -270,14 +336,13 @@ def _box_of(widths: np.ndarray, columns: np.ndarray) -> tuple[int, int, int, int
 
 
 def _widths(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Width (pixels) of the mask on each of ``rows`` (clipped, rounded)."""
-    return _widths_of(_counts(mask, 1), rows)
+    """Width (pixels) of the mask (h, w) on each of ``rows`` (:func:`_rows`)."""
+    return _counts(mask, 1)[_rows(rows, len(mask))].astype(np.float64)
 
 
-def _widths_of(widths: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """:func:`_widths` of a mask from its set pixels per row ``widths`` (h,) (:func:`_counts`)."""
-    r = _clip(np.rint(rows).astype(int), 0, len(widths) - 1)
-    return widths[r].astype(np.float64)
+def _rows(rows: np.ndarray, h: int) -> np.ndarray:
+    """Rows (n,) of an image ``h`` rows tall, rounded and clipped to it: (n,) int."""
+    return _clip(np.rint(rows).astype(int), 0, h - 1)
 
 
 def _clip(a, lo, hi):
@@ -289,21 +354,23 @@ def _clip(a, lo, hi):
 
 def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: str,
          iterations: int, tilt: bool = False, keep_radii: bool = False,
-         occluders: np.ndarray | None = None, turn: bool = True) -> tuple[_Model, float]:
+         occluders: np.ndarray | None = None, turn: bool = True,
+         box: tuple[int, int, int, int] | None = None) -> tuple[_Model, float]:
     """Refine ``model`` so that its silhouette matches ``mask``; returns (model, IoU). A lying
     model's axis stays parallel to the plane, or with ``tilt`` rests on its hull
     (:func:`_rest_on_hull`) and, with ``turn``, turns in the plane as the outline's orientation
     says. With ``keep_radii`` only the ends and the position move, and the
     top end is matched where the outline is ``TOP_SHARE`` of its widest (a row or two of
     segmentation spill above a rim would pull a straight top up). On the ``occluders``'
-    pixels (see :class:`_Frame`) the mask takes whatever the model draws."""
+    pixels (see :class:`_Frame`) the mask takes whatever the model draws. ``box``: the
+    :func:`_box` of ``mask`` and ``occluders``, where known (the fits of one mask share it)."""
     n = plane.normal
-    box = _box(mask, occluders)
+    box = _box(mask, occluders) if box is None else box
     # a lying axis's trial turn about the normal (0.05 rad), to see how its image turns
     probe = rotation_about(n, 0.05) if resting == "lying" and turn else None
     for it in range(iterations + 1):
-        frame = _Frame.along(model, mask, K, occluders, box)
-        ren = frame.draw(model, K, mask.shape)
+        frame = _Frame.along(model, mask, K, occluders, box, drawn=True)
+        ren = frame.drawn
         if it == iterations or not ren.any():
             break
         obs = frame.seen(ren)
@@ -317,8 +384,8 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         obs_widths, obs_columns = _counts(obs, 1), _counts(obs, 0)
         ren_widths, ren_columns = _counts(ren, 1), _counts(ren, 0)
         if not keep_radii:
-            rows = frame.point(project(model.centres(), K))[:, 1]
-            ratio = (_widths_of(obs_widths, rows) + 0.5) / (_widths_of(ren_widths, rows) + 0.5)
+            at = _rows(frame.point(project(model.centres(), K))[:, 1], frame.size)
+            ratio = (obs_widths[at] + 0.5) / (ren_widths[at] + 0.5)
             model.radii = _clip(model.radii * _clip(ratio, 0.7, 1.4) ** 0.8,
                                 0.002 * model.height, None)
         share = TOP_SHARE if keep_radii else 0.0
@@ -327,13 +394,14 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         eps = 0.005
         # pixels moved in the window per metre of each parameter (finite differences): the
         # base and the top, then the top moved along the axis and the base moved two ways
-        top = model.base + model.height * model.axis
+        base, axis = model.base.tolist(), model.axis.tolist()
+        top = _moved(base, model.height, axis)
         if resting == "standing":
             away = unit(plane.project_direction(model.base))
             side = cross3(n, away)
-            a0, b0, bt, a_away, a_side = frame.point(project(np.stack([
-                model.base, top, top + eps * model.axis, model.base + eps * away,
-                model.base + eps * side]), K))
+            a0, b0, bt, a_away, a_side = frame.point(_projected([
+                base, top, _moved(top, eps, axis), _moved(base, eps, away.tolist()),
+                _moved(base, eps, side.tolist())], K)).tolist()
             # top: the height; bottom: the base moves towards / away from the camera
             dh = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
             db = _metres(b_obs - b_ren, a_away[1] - a0[1], eps)
@@ -344,9 +412,9 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
         else:
             # lying: move each end along the axis, the axis sideways in the plane
             side = unit(cross3(n, model.axis))
-            a0, b0, bt, a_b, a_side = frame.point(project(np.stack([
-                model.base, top, top + eps * model.axis, model.base - eps * model.axis,
-                model.base + eps * side]), K))
+            a0, b0, bt, a_b, a_side = frame.point(_projected([
+                base, top, _moved(top, eps, axis), _moved(base, -eps, axis),
+                _moved(base, eps, side.tolist())], K)).tolist()
             dt = _metres(t_obs - t_ren, bt[1] - b0[1], eps)
             db = _metres(b_obs - b_ren, a_b[1] - a0[1], eps)
             ds = _metres(x_obs - x_ren, a_side[0] - a0[0], eps)
@@ -357,9 +425,9 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
             d_img = (_orientation(obs, _box_of(obs_widths, obs_columns))
                      - _orientation(ren, _box_of(ren_widths, ren_columns))) if turn else 0.0
             if abs(d_img) > 1e-3:
-                turned = probe @ model.axis
-                tip = model.base + model.height * turned
-                p = frame.point(project(np.stack([model.base, tip]), K))
+                base = model.base.tolist()
+                tip = _moved(base, model.height, (probe @ model.axis).tolist())
+                p = frame.point(_projected([base, tip], K))
                 gain = (np.arctan2(p[1, 0] - p[0, 0], p[0, 1] - p[1, 1])) / 0.05
                 if abs(gain) > 1e-3:
                     mid = model.base + 0.5 * model.height * model.axis
@@ -374,13 +442,16 @@ def _fit(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane, resting: 
     if ren.any() and not keep_radii:
         hidden = _hidden(model, frame, ren, K)
         if hidden.any():
-            model.radii = _fill_hidden(model.radii, hidden)
-            ren = frame.draw(model, K, mask.shape)
+            radii = _fill_hidden(model.radii, hidden)
+            if not np.array_equal(radii, model.radii):  # else the same silhouette
+                model.radii = radii
+                ren = frame.draw(model, K, mask.shape)
     return model, frame.iou(ren)
 
 
 def straightened(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, rise: float = 0.35,
-                 loss: float = 0.002, occluders: np.ndarray | None = None) -> RevolutionFit:
+                 loss: float = 0.002, occluders: np.ndarray | None = None,
+                 box: tuple[int, int, int, int] | None = None) -> RevolutionFit:
     """A standing ``fit`` whose profile only narrows upwards (nowhere wider, by ``rise`` of its
     largest radius, than at a level below) with its hidden levels between shown ones widened
     towards the straight line between those, as far as the outline keeps its IoU (within
@@ -389,13 +460,13 @@ def straightened(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, rise: floa
     radius error by about a quarter). Applied to the chosen fit only: the raw readings that
     decide standing from lying are counted on the fitted, dented surface, where a straightened
     flask can lose its vote to a lying fit; lying fits are left as they are (straightening them
-    loses grasps). ``occluders``: see :class:`_Frame`."""
+    loses grasps). ``occluders``: see :class:`_Frame`; ``box``: see :func:`_fit`."""
     if fit.resting != "standing":
         return fit
     radii = fit.profile[1:-1, 0] * fit.height
     model = _Model(fit.base.copy(), fit.axis.copy(), fit.height, radii.copy())
-    frame = _Frame.along(model, mask, K, occluders)
-    ren = frame.draw(model, K, mask.shape)
+    frame = _Frame.along(model, mask, K, occluders, box, drawn=True)
+    ren = frame.drawn
     hidden = _hidden(model, frame, ren, K)
     shown = np.nonzero(~hidden)[0]
     if len(shown) < 2 or (radii - np.minimum.accumulate(radii)).max() > rise * radii.max():
@@ -420,13 +491,14 @@ def _hidden(model: _Model, frame: _Frame, ren: np.ndarray, K: np.ndarray) -> np.
     return 2 * model.radii * K[0, 0] / centres[:, 2] < drawn - 2
 
 
-def _straight_top(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane,
-                  iterations: int, occluders: np.ndarray | None = None
-                  ) -> tuple[_Model, float] | None:
-    """The standing ``model`` with its top levels above the highest level the silhouette shows
-    widened to that level's radius, its height refitted; None if the top level shows."""
-    frame = _Frame.along(model, mask, K, occluders)
-    hidden = _hidden(model, frame, frame.draw(model, K, mask.shape), K)
+def _straight_top(model: _Model, outline: "_Outline", K: np.ndarray, plane: Plane,
+                  iterations: int) -> tuple[_Model, float] | None:
+    """The standing ``model`` of ``outline`` with its top levels above the highest level the
+    silhouette shows widened to that level's radius, its height refitted; None if the top
+    level shows."""
+    mask, occluders, box = outline.mask, outline.occluders, outline.box
+    frame = _Frame.along(model, mask, K, occluders, box, drawn=True)
+    hidden = _hidden(model, frame, frame.drawn, K)
     shown = np.nonzero(~hidden)[0]
     if not hidden[-1] or len(shown) == 0:
         return None
@@ -435,7 +507,7 @@ def _straight_top(model: _Model, mask: np.ndarray, K: np.ndarray, plane: Plane,
     radii[top + 1:] = np.maximum(radii[top + 1:], radii[top])
     start = _Model(model.base.copy(), model.axis.copy(), model.height, radii)
     return _fit(start, mask, K, plane, "standing", iterations, keep_radii=True,
-                occluders=occluders)
+                occluders=occluders, box=box)
 
 
 def _fill_hidden(radii: np.ndarray, hidden: np.ndarray) -> np.ndarray:
@@ -483,24 +555,44 @@ def _rest_on_hull(model: _Model, plane: Plane) -> None:
     model.base = base + (h0 - plane.height(base[None])[0]) * n
 
 
-def _principal(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Centroid (2,), unit major direction (2,) and elongation of a mask's pixels."""
-    ys, xs = _pixels(mask)
-    pts = np.column_stack([xs, ys]).astype(np.float64)
-    centre = pts.mean(0)
-    evals, evecs = np.linalg.eigh(np.cov((pts - centre).T))
-    return centre, evecs[:, 1], float(np.sqrt(evals[1] / max(evals[0], 1e-9)))
+@dataclass(frozen=True)
+class _Outline:
+    """A mask ``(H, W) bool`` to fit, the pixels ``occluders`` (H, W) bool of objects in front
+    that may hide it (see :class:`_Frame`; None: none), and what the fits read of them more
+    than once, worked out once: ``box``, the :func:`_box` of both; the mask's set pixels
+    ``ys``, ``xs`` (n,) (:func:`_pixels`) and their count ``area``; their centroid ``centre``
+    (2,), unit major direction ``major`` (2,) and ``elongation`` (the square root of the
+    ratio of their spreads along the major and minor directions)."""
+
+    mask: np.ndarray
+    occluders: np.ndarray | None
+    box: tuple[int, int, int, int]
+    ys: np.ndarray
+    xs: np.ndarray
+    area: int
+    centre: np.ndarray
+    major: np.ndarray
+    elongation: float
+
+    @classmethod
+    def of(cls, mask: np.ndarray, occluders: np.ndarray | None = None) -> "_Outline":
+        ys, xs = _pixels(mask)
+        pts = np.column_stack([xs, ys]).astype(np.float64)
+        centre = pts.mean(0)
+        evals, evecs = np.linalg.eigh(np.cov((pts - centre).T))
+        return cls(mask, occluders, _box(mask, occluders), ys, xs, len(xs), centre,
+                   evecs[:, 1], float(np.sqrt(evals[1] / max(evals[0], 1e-9))))
 
 
-def _init_standing(mask, K, plane, levels) -> _Model | None:
-    centre, _, _ = _principal(mask)
+def _init_standing(outline: _Outline, K, plane, levels) -> _Model | None:
+    centre = outline.centre
     p = plane.intersect(_ray(centre, K))
     if not np.all(np.isfinite(p)):
         return None
     n = plane.normal
     up = project(np.stack([p, p + 0.05 * n]), K)
     up = unit(up[1] - up[0])
-    ys, xs = _pixels(mask)
+    ys, xs = outline.ys, outline.xs
     along = xs * up[0] + ys * up[1]
     low = along <= along.min() + 1.5
     bottom = np.array([xs[low].mean(), ys[low].mean()])
@@ -508,7 +600,7 @@ def _init_standing(mask, K, plane, levels) -> _Model | None:
     if not np.all(np.isfinite(front)):
         return None
     z = front[2]
-    width_px = mask.sum() / max(np.ptp(along), 1.0)
+    width_px = outline.area / max(np.ptp(along), 1.0)
     r = 0.5 * width_px * z / K[0, 0]
     base = front + r * unit(plane.project_direction(front))
     top = np.array([xs[along >= along.max() - 1.5].mean(), ys[along >= along.max() - 1.5].mean()])
@@ -518,13 +610,14 @@ def _init_standing(mask, K, plane, levels) -> _Model | None:
     return _Model(base, n.copy(), height, np.full(levels, r))
 
 
-def _init_lying(mask, K, plane, levels, across_major: bool = False) -> _Model | None:
+def _init_lying(outline: _Outline, K, plane, levels, across_major: bool = False
+                ) -> _Model | None:
     """A lying cylinder along the outline's major axis (or, ``across_major``, its minor one:
     a lying vessel about as long as it is wide has no telling major axis)."""
-    centre, major, _ = _principal(mask)
+    centre, major = outline.centre, outline.major
     if across_major:
         major = np.array([-major[1], major[0]])
-    ys, xs = _pixels(mask)
+    ys, xs = outline.ys, outline.xs
     along = (xs - centre[0]) * major[0] + (ys - centre[1]) * major[1]
     across = -(xs - centre[0]) * major[1] + (ys - centre[1]) * major[0]
     mid = plane.intersect(_ray(centre, K))
@@ -649,8 +742,7 @@ def carved(fit: RevolutionFit, mask: np.ndarray, depth: np.ndarray, K: np.ndarra
     top too high (by 17 mm on average against 12 mm with the cone)."""
     if fit.resting != "standing":
         return fit
-    ys, xs = _pixels(mask & (depth > 0))
-    xs, ys, raw = evenly((xs, ys, depth[ys, xs].astype(np.float64)), CARVE_SAMPLES)
+    xs, ys, raw = evenly(_read(mask, depth), CARVE_SAMPLES)
     front = fit_depth(fit, xs, ys, K, mask.shape)
     hit = np.isfinite(front)
     if hit.sum() < CARVE_READINGS:
@@ -718,11 +810,20 @@ def off_table_readings(mask: np.ndarray, depth: np.ndarray, K: np.ndarray, plane
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixels (xs, ys) and raw depth of the mask's readings more than ``band`` above the table
     (those on it are see-through readings), at most ``samples`` of them, evenly spread."""
-    ys, xs = _pixels(mask & (depth > 0))
-    z = depth[ys, xs].astype(np.float64)
+    xs, ys, z = _read(mask, depth)
     pts = unproject(np.column_stack([xs, ys]).astype(np.float64), z, K)
     keep = plane.height(pts) > band
     return evenly((xs[keep], ys[keep], z[keep]), samples)
+
+
+def _read(mask: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pixels ``xs``, ``ys`` (n,) of ``mask`` (H, W) bool where ``depth`` (H, W) metres
+    reads (> 0), in ``np.nonzero``'s order, and their depth (n,) float64: read at the mask's
+    pixels only (comparing the whole frame's depth costs more than the rest)."""
+    ys, xs = _pixels(mask)
+    z = depth[ys, xs]
+    keep = z > 0
+    return xs[keep], ys[keep], z[keep].astype(np.float64)
 
 
 def evenly(readings: tuple[np.ndarray, ...], samples: int) -> tuple[np.ndarray, ...]:
@@ -742,10 +843,9 @@ def fit_depth(fit: RevolutionFit, xs: np.ndarray, ys: np.ndarray, K: np.ndarray,
               shape: tuple[int, int], far: bool = False) -> np.ndarray:
     """Depth (n,) of the fitted solid's front surface at pixels (xs, ys) (NaN: off it); with
     ``far``, of the surface where the rays leave it."""
-    mesh = revolve(fit.profile, 24)
+    vertices, faces = revolved(fit.profile, 24)
     T = fit.T_cam_obj
-    uv, pts = project_mesh(np.asarray(mesh.vertices), T[:3, :3], T[:3, 3], fit.height, K)
-    faces = np.asarray(mesh.faces)
+    uv, pts = project_mesh(vertices, T[:3, :3], T[:3, 3], fit.height, K)
     return surface_depth(uv, pts, faces[:, ::-1] if far else faces, K, xs, ys, shape)
 
 
@@ -801,7 +901,11 @@ def axial_view_angle(mask: np.ndarray, K: np.ndarray, plane: Plane) -> float:
     """Degrees between the table normal and the camera ray to the mask's centroid: near 0,
     the camera looks down a standing object's axis and its outline says almost nothing about
     its height or profile (a bottle, a jar and a glass all draw a disc)."""
-    centre, _, _ = _principal(mask)
+    return _view_angle(_Outline.of(mask).centre, K, plane)
+
+
+def _view_angle(centre: np.ndarray, K: np.ndarray, plane: Plane) -> float:
+    """:func:`axial_view_angle` from the mask's centroid ``centre`` (2,) pixels."""
     return float(np.degrees(np.arccos(np.clip(-unit(_ray(centre, K)) @ plane.normal, -1, 1))))
 
 
@@ -834,8 +938,9 @@ def _percentile_90(ordered: np.ndarray) -> float:
     return b - (b - a) * (1 - t) if t >= 0.5 else a + (b - a) * t
 
 
-def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray, levels: int,
-               band: float, min_points: int, iterations: int = 8) -> RevolutionFit | None:
+def _fit_axial(outline: _Outline, K: np.ndarray, plane: Plane, points: np.ndarray,
+               levels: int, band: float, min_points: int, iterations: int = 8
+               ) -> RevolutionFit | None:
     """A standing solid seen down its axis, from the readings on it (camera frame, metres).
 
     The height is a high percentile of the readings' heights above the table and the profile
@@ -850,16 +955,16 @@ def _fit_axial(mask: np.ndarray, K: np.ndarray, plane: Plane, points: np.ndarray
     if len(points) < min_points:
         return None
     height = float(np.percentile(above, 98))
-    centre_px, _, _ = _principal(mask)
+    mask, centre_px = outline.mask, outline.centre
     mid = Plane(n, plane.offset - 0.5 * height).intersect(_ray(centre_px, K))
     if not np.all(np.isfinite(mid)) or height <= band:
         return None
     base = mid - 0.5 * height * n
-    widest = np.sqrt(mask.sum() / np.pi) * mid[2] / K[0, 0]
+    widest = np.sqrt(outline.area / np.pi) * mid[2] / K[0, 0]
     e1 = unit(plane.project_direction(np.array([1.0, 0, 0])))
     e2 = np.cross(n, e1)
     zk = np.linspace(0.0, height, levels)
-    area = float(mask.sum())
+    area = float(outline.area)
     for it in range(iterations + 1):
         rel = points - base
         z = rel @ n
@@ -949,21 +1054,23 @@ def moved_nearer(fit: RevolutionFit, factor: float, plane: Plane) -> RevolutionF
                          "standing", fit.iou)
 
 
-def _nearer(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, plane: Plane,
-            iterations: int, occluders: np.ndarray, on_surface: Callable[[RevolutionFit], int],
-            need: int, iou_gap: float, every: int = 2) -> RevolutionFit:
-    """``fit`` refitted standing nearer, at every ``every``-th of :func:`nearer_factors`
-    (from :func:`moved_nearer` there), where most readings lie on its surface, if at least
-    ``need`` do and its IoU is within ``iou_gap`` of the fit's; else ``fit``. The outline
-    above a hidden foot fits a short solid standing where the occluder's outline crosses it;
-    started further down, the fit keeps its foot there behind the occluder, and the readings
-    on what shows tell how far down it stands."""
+def _nearer(fit: RevolutionFit, outline: _Outline, K: np.ndarray, plane: Plane,
+            iterations: int, on_surface: Callable[[RevolutionFit], int], need: int,
+            iou_gap: float, every: int = 2) -> RevolutionFit:
+    """``fit`` of ``outline`` (with occluders) refitted standing nearer, at every
+    ``every``-th of :func:`nearer_factors` (from :func:`moved_nearer` there), where most
+    readings lie on its surface, if at least ``need`` do and its IoU is within ``iou_gap`` of
+    the fit's; else ``fit``. The outline above a hidden foot fits a short solid standing where
+    the occluder's outline crosses it; started further down, the fit keeps its foot there
+    behind the occluder, and the readings on what shows tell how far down it stands."""
+    mask, occluders = outline.mask, outline.occluders
     best, most = fit, need - 1
     for f in nearer_factors(fit, occluders, K, plane, mask)[every::every]:
         start = moved_nearer(fit, f, plane)  # levels evenly spaced, as many as the fit's
         model = _Model(start.base.copy(), start.axis.copy(), start.height,
                        start.profile[1:-1, 0] * start.height)
-        model, iou = _fit(model, mask, K, plane, "standing", iterations, occluders=occluders)
+        model, iou = _fit(model, mask, K, plane, "standing", iterations, occluders=occluders,
+                          box=outline.box)
         found = _result(model, "standing", iou)
         count = on_surface(found)
         if count > most and iou >= fit.iou - iou_gap:
@@ -1045,39 +1152,39 @@ def _refuted(readings: _Readings | None, fit: RevolutionFit, opts: FitOptions) -
     return readings is not None and readings.refutes(fit, opts)
 
 
-def _lying_starts(mask: np.ndarray, occluders: np.ndarray | None,
-                  opts: FitOptions) -> list[LyingStart]:
+def _lying_starts(outline: _Outline, opts: FitOptions) -> list[LyingStart]:
     """The lying fit's starts: along the major axis, turning. A near-square outline's major axis
     and orientation say nothing of a lying solid's axis (a beaker as long as it is wide), so
     there it starts both ways, turned or not; not where an object in front may cut the outline
     (the top of a glass behind another, a near-square that a lying fit drew better than the
     standing one, which the readings then chose)."""
-    square = opts.square_starts and _principal(mask)[2] < SQUARE_OUTLINE and \
-        (occluders is None or not occluders.any())
+    square = opts.square_starts and outline.elongation < SQUARE_OUTLINE and \
+        (outline.occluders is None or not outline.occluders.any())
     return [(False, True)] + ([(True, True), (True, False), (False, False)] if square else [])
 
 
-def _outline_fit(resting: str, starts: list[LyingStart], mask, K, plane, occluders,
+def _outline_fit(resting: str, starts: list[LyingStart], outline: _Outline, K, plane,
                  opts: FitOptions) -> tuple[_Model, float, LyingStart] | None:
     """The best silhouette fit of one resting hypothesis over its starts: (model, IoU, the
     start it won from), or None when no start can be set up."""
     tried = []
     for across, turn in starts:
-        model = _init_lying(mask, K, plane, opts.levels, across) if resting == "lying" else \
-            _init_standing(mask, K, plane, opts.levels)
+        model = _init_lying(outline, K, plane, opts.levels, across) if resting == "lying" \
+            else _init_standing(outline, K, plane, opts.levels)
         if model is not None:
-            tried.append((*_fit(model, mask, K, plane, resting, opts.iterations,
-                                occluders=occluders, turn=turn), (across, turn)))
+            tried.append((*_fit(model, outline.mask, K, plane, resting, opts.iterations,
+                                occluders=outline.occluders, turn=turn, box=outline.box),
+                          (across, turn)))
     if not tried:
         return None
     return max(tried, key=lambda t: t[1])
 
 
-def _straight_top_kept(fit: RevolutionFit, model: _Model, mask, K, plane, occluders,
+def _straight_top_kept(fit: RevolutionFit, model: _Model, outline: _Outline, K, plane,
                        readings: _Readings | None, opts: FitOptions) -> RevolutionFit:
     """The standing fit refitted with its hidden top levels straight
     (:func:`_straight_top`) if within ``straight_top_gap`` IoU and not refuted; else ``fit``."""
-    straight = _straight_top(model, mask, K, plane, opts.iterations, occluders)
+    straight = _straight_top(model, outline, K, plane, opts.iterations)
     if straight is not None and straight[1] >= fit.iou - opts.straight_top_gap:
         candidate = _result(straight[0], "standing", straight[1])
         if not _refuted(readings, candidate, opts):
@@ -1085,13 +1192,13 @@ def _straight_top_kept(fit: RevolutionFit, model: _Model, mask, K, plane, occlud
     return fit
 
 
-def _axial_kept(fit: RevolutionFit, mask, K, plane, readings: _Readings,
+def _axial_kept(fit: RevolutionFit, outline: _Outline, K, plane, readings: _Readings,
                 opts: FitOptions) -> tuple[RevolutionFit, int]:
     """The readings' fit (:func:`_fit_axial`) replaces the outline's if more readings lie on its
     surface and it is within ``axial_iou_gap`` IoU (off the axis, a flask's neck shifts against
     its body and the outline fit wins). Returns the fit and the readings on its surface."""
     count = readings.on_surface(fit, opts.depth_band)
-    down = _fit_axial(mask, K, plane, readings.points, opts.levels, opts.depth_band,
+    down = _fit_axial(outline, K, plane, readings.points, opts.levels, opts.depth_band,
                       opts.depth_min_points)
     down_count = readings.on_surface(down, opts.depth_band) if down is not None else -1
     if down_count > count and down.iou >= fit.iou - opts.axial_iou_gap:
@@ -1104,28 +1211,31 @@ def _by_readings(fits: list[tuple[float, RevolutionFit, int | None]], readings: 
     """Standing (fits[0]) against lying (fits[1]) by the readings: a refuted lying fit loses to
     an unrefuted standing one; else, with the IoUs within ``vote_iou_gap``, the one with
     ``depth_vote`` times more readings on its surface (at least ``depth_min_points``) wins.
-    None when the readings do not decide."""
+    None when the readings do not decide. The readings on the surfaces are counted only where
+    they are asked (IoUs that close)."""
+    if readings.refutes(fits[1][1], opts) and not readings.refutes(fits[0][1], opts):
+        return fits[0][1]  # readings high above a lying fit: it stands
+    close = abs(fits[0][1].iou - fits[1][1].iou) <= opts.vote_iou_gap
+    if not close:
+        return None
     support = [readings.on_surface(f, opts.depth_band) if count is None else count
                for _, f, count in fits]
     lo, hi = sorted(support)
-    close = abs(fits[0][1].iou - fits[1][1].iou) <= opts.vote_iou_gap
-    if readings.refutes(fits[1][1], opts) and not readings.refutes(fits[0][1], opts):
-        return fits[0][1]  # readings high above a lying fit: it stands
-    if close and hi >= opts.depth_min_points and hi >= opts.depth_vote * lo:
+    if hi >= opts.depth_min_points and hi >= opts.depth_vote * lo:
         return fits[int(np.argmax(support))][1]
     return None
 
 
-def _tilted(best: RevolutionFit, start: LyingStart, mask, K, plane, occluders,
+def _tilted(best: RevolutionFit, start: LyingStart, outline: _Outline, K, plane,
             opts: FitOptions) -> RevolutionFit:
     """A lying winner refitted resting on its hull, tilted, from its own start (the flat fit's
     radii hold the tilt as a taper), kept if within ``tilt_tolerance`` IoU. Decided flat: a
     tilt would let the lying fit take short standing vessels."""
-    model = _init_lying(mask, K, plane, opts.levels, start[0])
+    model = _init_lying(outline, K, plane, opts.levels, start[0])
     if model is None:
         return best
-    model, iou = _fit(model, mask, K, plane, "lying", opts.iterations, tilt=True,
-                      occluders=occluders, turn=start[1])
+    model, iou = _fit(model, outline.mask, K, plane, "lying", opts.iterations, tilt=True,
+                      occluders=outline.occluders, turn=start[1], box=outline.box)
     return _result(model, "lying", iou) if iou >= best.iou - opts.tilt_tolerance else best
 
 
@@ -1183,13 +1293,14 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *,
     opts = options
     readings = None if depth is None else \
         _Readings.of(mask, depth, K, plane, opts.depth_band, openings)
-    axial = readings is not None and axial_view_angle(mask, K, plane) < opts.axial_view
-    lying_starts = _lying_starts(mask, occluders, opts)
+    outline = _Outline.of(mask, occluders)
+    axial = readings is not None and _view_angle(outline.centre, K, plane) < opts.axial_view
+    lying_starts = _lying_starts(outline, opts)
     lying_start = lying_starts[0]  # the one the lying fit won from (its tilted refit's too)
     fits = []  # (score, fit, readings on its surface when already counted)
     for resting in ("standing", "lying") if opts.allow_lying else ("standing",):
         found = _outline_fit(resting, lying_starts if resting == "lying" else [(False, True)],
-                             mask, K, plane, occluders, opts)
+                             outline, K, plane, opts)
         if found is None:
             continue
         model, iou, start = found
@@ -1197,9 +1308,9 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *,
         if resting == "lying":
             lying_start = start
         else:
-            fit = _straight_top_kept(fit, model, mask, K, plane, occluders, readings, opts)
+            fit = _straight_top_kept(fit, model, outline, K, plane, readings, opts)
             if axial:
-                fit, count = _axial_kept(fit, mask, K, plane, readings, opts)
+                fit, count = _axial_kept(fit, outline, K, plane, readings, opts)
         fits.append((fit.iou + (opts.lying_margin if resting == "standing" else 0.0), fit,
                      count))
     if not fits:
@@ -1209,11 +1320,11 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *,
         decided = _by_readings(fits, readings, opts)
         best = best if decided is None else decided
     if best.resting == "lying":
-        best = _tilted(best, lying_start, mask, K, plane, occluders, opts)
+        best = _tilted(best, lying_start, outline, K, plane, opts)
     if readings is not None and occluders is not None and best.resting == "standing":
         def on_surface(fit: RevolutionFit) -> int:
             return readings.on_surface(fit, opts.depth_band)
-        best = _nearer(best, mask, K, plane, opts.iterations, occluders, on_surface,
+        best = _nearer(best, outline, K, plane, opts.iterations, on_surface,
                        max(opts.depth_min_points, opts.depth_vote * on_surface(best)),
                        opts.vote_iou_gap)
-    return straightened(best, mask, K, occluders=occluders)
+    return straightened(best, mask, K, occluders=occluders, box=outline.box)
