@@ -265,6 +265,36 @@ def test_an_outline_is_read_where_it_is_allowed_to_show():
     assert tf.shows_outline(patch, rimmed, over_table)
 
 
+def test_an_outline_is_followed_round_a_rim_but_not_into_other_objects():
+    """An open vessel seen from above: its instance is the front arc of the rim (its holes),
+    the rim's ellipse (the colour outline) reaches 65 px above it, the floor shows the table.
+    One step of growth reaches only the ellipse's lower part; followed step by step, the rim
+    closes and the mouth fills. Two objects read smoothly, their faces departing from the
+    table's colour, are never taken: a box whose edge a thin line of outline joins to the
+    rim (the line and the edge are thin), and one standing behind the rim, touching it along
+    30 px, which is taken only when its face is not known as read."""
+    shape = (160, 240)
+    yy, xx = np.mgrid[:shape[0], :shape[1]]
+    inside = ((xx - 100) / 60.0) ** 2 + ((yy - 80) / 40.0) ** 2
+    rim = (inside <= 1.0) & (inside >= 0.8)
+    arc = rim & (yy >= 105)  # the front of the rim, where the sensor failed
+    box = (xx >= 200) & (xx < 236) & (yy >= 30) & (yy < 130)
+    edge = box & ~((xx >= 202) & (xx < 234) & (yy >= 32) & (yy < 128))
+    line = (yy >= 79) & (yy < 81) & (xx >= 158) & (xx < 202)
+    behind = (xx >= 80) & (xx < 120) & (yy >= 4) & (yy < 41)
+    outline = rim | box | line | behind
+    mouth = inside < 0.8
+    once = tf.grow_to_outline(arc, outline, close_radius=5)
+    assert not once[mouth].any()
+    followed = tf.grow_to_outline(arc, outline, close_radius=5,
+                                  surfaces=(box & ~edge) | behind)
+    assert followed[mouth].all() and followed[rim].mean() > 0.95
+    assert not followed[box].any() and not followed[behind].any()
+    assert followed[line].mean() < 0.2
+    unread = tf.grow_to_outline(arc, outline, close_radius=5, surfaces=np.zeros(shape, bool))
+    assert unread[behind].all() and not unread[box].any()
+
+
 def test_an_instance_is_cut_to_its_outlines_hull_keeping_its_own_colour_and_readings():
     """A glass (ellipse) whose rim shows in colour, with a plain band of holes joined to its
     side (a stereo camera's shadow the step model misses): the cut keeps the glass and what is
@@ -617,6 +647,28 @@ def test_a_pitcher_near_the_tables_far_edge_keeps_to_its_outline(extsim):
     inst = Segmenter(SegmentConfig(), PlaneConfig())(fid, frame.rgb, frame.depth_m,
                                                      frame.camera.K)
     assert list(instance_ious(inst.ids, truth).values())[0] >= 0.83
+
+
+@pytest.mark.slow
+def test_open_vessels_seen_from_above_are_found_round_their_rims(extsim):
+    """extsim scene 1's water glass and scene 8's glass bowl, looked down into: the floor
+    reads the table, the holes cover an arc of the rim. Measured: best IoU 0.92 and 0.87;
+    grown by one step only, 0.38 and 0.11 (the bowl's instance a sliver of its front)."""
+    from sr3d_cli.config import IOConfig
+    from sr3d_cli.io.formats import discover_scenes
+
+    segmenter = Segmenter(SegmentConfig(), PlaneConfig())
+    best = {}
+    for source in discover_scenes(extsim, IOConfig(), None):
+        if source.name not in ("scene_0001", "scene_0008"):
+            continue
+        fid = source.frame_ids()[0]
+        frame = source.load_frame(fid)
+        truth = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
+        inst = segmenter(fid, frame.rgb, frame.depth_m, frame.camera.K)
+        best[source.name] = instance_ious(inst.ids, truth)
+    assert best["scene_0001"][3] >= 0.88 and min(best["scene_0001"].values()) >= 0.88
+    assert best["scene_0008"][1] >= 0.8
 
 
 def _moved_scores(root, down: int, right: int, only: str = "") -> list[float]:

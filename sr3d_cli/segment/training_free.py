@@ -29,7 +29,9 @@ The steps:
    :func:`table_colour_departure`) and those with no outline in colour at all (a sensor's
    dropout on a plain surface, :func:`shows_outline`, which reads the outline over the table
    only); each kept instance grown to its colour outline over the table's footprint
-   (:func:`grow_to_outline`), as a real glass's depth evidence covers only part of it;
+   (:func:`grow_to_outline`), as a real glass's depth evidence covers only part of it, and
+   the outline followed on round a rim (an open vessel looked down into shows the table
+   through its floor, its holes an arc of the rim);
 8. a standing instance joined to the readings inside its fitted solid's volume above it (an
    opaque cap or lid reads well and gives no glass evidence: :func:`with_parts_on_axis`);
 9. in a frame from a stereo camera (:func:`casts_stereo_shadows`), each instance cut to the
@@ -99,6 +101,7 @@ FAINT_COLOUR, FAINT_SHARE = 1.5, 0.02  # an instance is a dropout, not glass, wh
 OUTLINE_COLOUR = 2.5  # colour departure that marks a glass's outline, rim or highlight
 HULL_LEAST = 0.5  # least share of an instance its outline's hull must keep (within_outline_hull)
 OUTLINE_REACH = 25  # pixels around an instance searched for its outline (grow_to_outline)
+FOLLOWED_THICKNESS = 3  # px: radius of the disc that opens what following an outline adds
 OPAQUE_BAND = 8  # pixels around opaque evidence an instance is not grown into
 MAX_IMAGE_SHARE = 0.4  # most share of the image one instance covers: a region that large is the
 # table or the room failing as a whole, not an object standing on it
@@ -344,8 +347,20 @@ def opaque_objects(opaque: np.ndarray, departure: np.ndarray) -> np.ndarray:
     return keep[labels]
 
 
+def _grown_once(mask: np.ndarray, outline: np.ndarray, close_radius: int,
+                barred: np.ndarray | None, reach: int) -> np.ndarray:
+    """One step of :func:`grow_to_outline`: ``mask`` ``(H, W) bool`` with the ``outline``
+    pixels within ``reach`` of it, closed and filled, less ``barred``, the parts joined to it."""
+    near = cv2.dilate(mask.astype(np.uint8), _disk(reach)) > 0
+    grown = _closed(mask | (near & outline), close_radius)
+    if barred is not None:
+        grown &= ~barred
+    return joined_to(grown, mask)
+
+
 def grow_to_outline(mask: np.ndarray, outline: np.ndarray, *, close_radius: int,
-                    barred: np.ndarray | None = None, reach: int = OUTLINE_REACH) -> np.ndarray:
+                    barred: np.ndarray | None = None, reach: int = OUTLINE_REACH,
+                    surfaces: np.ndarray | None = None) -> np.ndarray:
     """An instance ``(H, W) bool`` grown to the colour outline around it.
 
     The depth evidence of a real glass often covers only where the sensor failed (its rim, a
@@ -354,12 +369,33 @@ def grow_to_outline(mask: np.ndarray, outline: np.ndarray, *, close_radius: int,
     within ``reach`` of the instance are added, the result closed and filled, and only the
     parts joined to the instance kept. ``barred`` ``(H, W) bool`` (other instances) is never
     taken.
+
+    With ``surfaces`` ``(H, W) bool`` (smooth readings above the table, ``Evidence.opaque``)
+    the outline is then followed further, step by step, until a step adds nothing: an open
+    vessel seen from above (a bowl, a water glass) shows the table through its floor, and its
+    evidence of holes covers an arc of the rim, the rim's ellipse more than ``reach`` from
+    it. The further steps never take ``surfaces`` beyond the first step's growth (an opaque
+    object beside the glass, whose face departs from the table's colour too, is read
+    smoothly), and of what they add only what an opening by a disc of
+    :data:`FOLLOWED_THICKNESS` px keeps (parts at least 7 px across), joined to the first
+    step's growth: a rim followed round encloses the vessel's mouth, which fills; an outline
+    followed along another object's edge stays a thin line.
     """
-    near = cv2.dilate(mask.astype(np.uint8), _disk(reach)) > 0
-    grown = _closed(mask | (near & outline), close_radius)
-    if barred is not None:
-        grown &= ~barred
-    return joined_to(grown, mask)
+    grown = _grown_once(mask, outline, close_radius, barred, reach)
+    if surfaces is None:
+        return grown
+    barred = surfaces & ~grown if barred is None else barred | (surfaces & ~grown)
+    followed = grown
+    while True:
+        step = _grown_once(followed, outline, close_radius, barred, reach)
+        if step.sum() == followed.sum():
+            break
+        followed = step
+    if followed.sum() == grown.sum():
+        return grown
+    added = cv2.morphologyEx((followed & ~grown).astype(np.uint8), cv2.MORPH_OPEN,
+                             _disk(FOLLOWED_THICKNESS)) > 0
+    return joined_to(grown | added, grown)
 
 
 @dataclass
@@ -802,8 +838,8 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     # the table's colour, and the closing would join an instance to the room's edge and fill
     # the table between (extsim scene 9: a pitcher 2 cm from the table's far edge)
     outline = outline_evidence(departure, on_table) & footprint
-    out = [Candidate(grow_to_outline(c.mask, outline, close_radius=5,
-                                     barred=claimed & ~c.mask), c.score) for c in kept]
+    out = [Candidate(grow_to_outline(c.mask, outline, close_radius=5, barred=claimed & ~c.mask,
+                                     surfaces=ev.opaque), c.score) for c in kept]
     # a region cut at a dent in its evidence that the growth filled is one object again
     out = rejoined(out, K, plane, depth_m, glass, fits)
     tests = BodyTests(rgb, depth_m, ev, min_area=least, lab=lab)
