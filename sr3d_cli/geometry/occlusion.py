@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from sr3d_cli.geometry.camera import depth_to_points
+from sr3d_cli.geometry.camera import depth_to_points, mask_window
 from sr3d_cli.geometry.plane import Plane
 
 TOUCH_PX = 2  # pixels between two outlines that still touch
@@ -28,9 +28,9 @@ def down_direction(mask: np.ndarray, K: np.ndarray, plane: Plane) -> np.ndarray:
 def _lowest(mask: np.ndarray, down: np.ndarray) -> float:
     """How far ``down`` (2,) the image the set pixels of ``mask`` (H, W) bool reach: the most
     of ``x * down[0] + y * down[1]``, over the pixels of the set pixels' box only."""
-    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
-    ys, xs = np.nonzero(mask[y:y + h, x:x + w])
-    return float(((xs + x) * down[0] + (ys + y) * down[1]).max())
+    rows, cols = mask_window(mask, 0)
+    ys, xs = np.nonzero(mask[rows, cols])
+    return float(((xs + cols.start) * down[0] + (ys + rows.start) * down[1]).max())
 
 
 def in_front(other: np.ndarray, mask: np.ndarray, down: np.ndarray) -> bool:
@@ -40,12 +40,9 @@ def in_front(other: np.ndarray, mask: np.ndarray, down: np.ndarray) -> bool:
     if not other.any() or not mask.any():
         return False
     # the mask's dilation lies within its set pixels' box widened by TOUCH_PX: dilated there
-    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
-    x0, y0 = max(x - TOUCH_PX, 0), max(y - TOUCH_PX, 0)
-    x1, y1 = min(x + w + TOUCH_PX, mask.shape[1]), min(y + h + TOUCH_PX, mask.shape[0])
-    near = cv2.dilate(mask[y0:y1, x0:x1].view(np.uint8),
-                      np.ones((2 * TOUCH_PX + 1,) * 2, np.uint8)) > 0
-    return bool((near & other[y0:y1, x0:x1]).any()) and \
+    box = mask_window(mask, TOUCH_PX)
+    near = cv2.dilate(mask[box].view(np.uint8), np.ones((2 * TOUCH_PX + 1,) * 2, np.uint8)) > 0
+    return bool((near & other[box]).any()) and \
         _lowest(other, down) > _lowest(mask, down) + NEARER_PX
 
 
