@@ -391,7 +391,7 @@ def grow_to_outline(mask: np.ndarray, outline: np.ndarray, *, close_radius: int,
         if step.sum() == followed.sum():
             break
         followed = step
-    if followed.sum() == grown.sum():
+    if followed is grown:  # no step added anything
         return grown
     added = cv2.morphologyEx((followed & ~grown).astype(np.uint8), cv2.MORPH_OPEN,
                              _disk(FOLLOWED_THICKNESS)) > 0
