@@ -85,7 +85,8 @@ def test_no_instance_on_an_opaque_box_with_its_stereo_shadow():
 def test_the_opaque_veto_is_what_rejects_the_box(monkeypatch):
     """The same box in the colour of the table behind it (a grey box on a grey table) is
     not vetoed by its colour: its readings still mark it as opaque evidence, so it is not an
-    instance either; a red box with its readings broken like glass's is vetoed by colour only."""
+    instance either; a red box with its readings broken like glass's is vetoed by colour only
+    (its veto, and its holes in its own colour on its body: without_opaque_dropouts)."""
     rgb, depth, plane = _table_frame((150, 150, 150))
     ids, _, _, box_depth = solids_on_table([(GLASS, 0.1, 0.0, 0.0)])
     body = ids > 0
@@ -94,6 +95,7 @@ def test_the_opaque_veto_is_what_rejects_the_box(monkeypatch):
     rgb[body] = (200, 30, 30)
     assert _segment(rgb, depth).objects == []
     monkeypatch.setattr(tf, "OPAQUE_COLOUR", np.inf)
+    monkeypatch.setattr(tf, "without_opaque_dropouts", lambda found, *args: found)
     found = _segment(rgb, depth)
     assert len(found.objects) == 1
     assert instance_ious(found.ids, ids)[1] > 0.7
@@ -103,8 +105,9 @@ def test_touching_opaque_objects_read_like_glass_are_dropped_before_any_split_is
         monkeypatch):
     """Two dark cases side by side whose readings break like glass's (half of them missing) make
     one region; its colour replaces the table's, so it is dropped without a revolution fit spent
-    on judging its split. Judged (the colour rule off), the same region takes split_touching's
-    fits and comes out as two instances, one per case."""
+    on judging its split. Judged (the colour rules off: the veto and the holes in their own
+    colour on a body, without_opaque_dropouts), the same region takes split_touching's fits and
+    comes out as two instances, one per case."""
     rgb, depth, plane = _table_frame((150, 150, 150))
     ids, _, _, body_depth = solids_on_table([(GLASS, 0.1, -0.032, 0.0),
                                              (GLASS, 0.1, 0.034, 0.01)])
@@ -119,6 +122,7 @@ def test_touching_opaque_objects_read_like_glass_are_dropped_before_any_split_is
     assert _segment(rgb, depth).objects == []
     assert fits == []
     monkeypatch.setattr(tf, "OPAQUE_COLOUR", np.inf)
+    monkeypatch.setattr(tf, "without_opaque_dropouts", lambda found, *args: found)
     found = _segment(rgb, depth)
     assert len(fits) >= 3  # the whole and both parts of at least one cut
     assert len(found.objects) == 2
@@ -552,14 +556,44 @@ def test_a_body_whose_join_splits_is_kept_beside_the_instance_where_it_is_a_body
     assert [m.sum() for m in masks(None)] == [top.sum()]
 
 
+def test_the_holes_of_an_opaque_body_in_its_own_colour_are_no_instance():
+    """without_opaque_dropouts: a candidate lying in a body that does not show the table and
+    that it holds less than half of (an opaque object) is dropped where its colour departs from
+    the table's (a dark case that drops out where it is darkest); kept where it shows the
+    table's colour, holds half of the body (a glass's lower part read smoothly), lies in it by
+    less than half, or the body shows the table."""
+    shape = (120, 160)
+    body = np.zeros(shape, bool)
+    body[40:90, 40:100] = True  # 3000 px read smoothly above the table
+    holes = np.zeros(shape, bool)
+    holes[50:70, 50:80] = True  # 600 px inside it: a fifth of it
+    dark = np.full(shape, 5.0)
+    dark[holes] = 3.0  # the holes show the case's colour, under the opaque level
+
+    def kept(candidate, bodies, departure):
+        return [c.mask.sum() for c in tf.without_opaque_dropouts(
+            [tf.Candidate(candidate, 0.9)], bodies, departure)]
+
+    assert kept(holes, [(body, False)], dark) == []
+    assert kept(holes, [(body, True)], dark) == [600]
+    assert kept(holes, [(body, False)], np.where(holes, 1.0, dark)) == [600]
+    small = np.zeros(shape, bool)
+    small[55:80, 50:80] = True  # 750 px, 600 of them held by the candidate
+    assert kept(holes, [(small, False)], dark) == [600]
+    beside = np.zeros(shape, bool)
+    beside[75:115, 50:80] = True  # 1200 px, 450 of them in the body
+    assert kept(beside, [(body, False)], dark) == [1200]
+
+
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.755, 16 of 16 objects at IoU >= 0.5 (two at 0.53 and 0.56), false
-    instances (>= 300 px, IoU < 0.2 with every object) 0.09 per frame; with a region's part
-    beyond the table kept while its cuts are judged (ClearGrasp 123's third holder lost with
-    the wall's holes and the table they close in: 0.53 -> 0.22) 0.731 and 15; without the
-    pieces of a lying object joined
+    per true object mean 0.755, 16 of 16 objects at IoU >= 0.5 (two at 0.53 and 0.56), no
+    false instance (>= 300 px, IoU < 0.2 with every object); with the holes of an opaque body
+    kept (``without_opaque_dropouts``: ClearGrasp 123's earphone case) 0.09 per frame; with a
+    region's part beyond the table kept while its cuts are judged (ClearGrasp 123's third
+    holder lost with the wall's holes and the table they close in: 0.53 -> 0.22) 0.731 and
+    15; without the pieces of a lying object joined
     (``lying_pieces_joined``: ClearGrasp 080's lying bottle in three pieces, 0.88 -> 0.25 and
     two false instances) 0.692, 14 and 0.27; without the bodies that hide the table joined to
     the instance holding half of them too (``BODY_JOINED`` out of reach: ClearGrasp 123's
@@ -583,7 +617,7 @@ def test_measured_on_the_shared_real_frames(realdata):
                          if iou < 0.2 and (inst.ids == k).sum() >= 300)
             frames += 1
     assert frames == 11 and len(best) == 16
-    assert false / frames <= 0.1
+    assert false == 0
     assert np.mean(best) >= 0.74 and sum(v >= 0.5 for v in best) >= 15  # one at 0.53
     assert len(container) == 8 and np.mean(container) >= 0.77
 

@@ -119,6 +119,8 @@ BODY_JOINED = 0.5  # share of a body that does not show the table one instance m
 # body to join it: the glass's lower part, read smoothly (ClearGrasp 123's holders: 0.56 and 0.66
 # held, 87-89% of each body inside its holder; an earphone case beside a false instance: 0.20)
 BODY_SHARED = 0.1  # share of a body each of two instances holding it makes it touching objects
+OPAQUE_DROPOUTS = 0.5  # share of an instance inside an opaque body that makes it that body's
+# dropouts (without_opaque_dropouts; ClearGrasp 123's earphone case: 0.54-0.69 in every view)
 SEE_THROUGH_WINDOW = 91  # pixels: the table's colour around a body is taken beyond its width
 TABLE_LIKE = 1.5  # colour departure under which a pixel shows the table's colour
 BEYOND_MARGIN = 3  # pixels: an object's part beyond the table's far edge stays within this of
@@ -289,13 +291,14 @@ def table_colour_departure(rgb: np.ndarray, on_table: np.ndarray, window: int = 
     return out
 
 
-def looks_opaque(mask: np.ndarray, departure: np.ndarray) -> bool:
+def looks_opaque(mask: np.ndarray, departure: np.ndarray, level: float | None = None) -> bool:
     """Whether an instance ``(H, W) bool`` is an opaque object by its colour: the median
-    :func:`table_colour_departure` over its pixels with a table nearby is above
-    :data:`OPAQUE_COLOUR`."""
+    :func:`table_colour_departure` over its pixels with a table nearby is above ``level``
+    (:data:`OPAQUE_COLOUR` unless given)."""
     known = departure[mask]
     known = known[np.isfinite(known)]
-    return known.size > 0 and float(np.median(known)) > OPAQUE_COLOUR
+    return known.size > 0 and \
+        float(np.median(known)) > (OPAQUE_COLOUR if level is None else level)
 
 
 def outline_evidence(departure: np.ndarray, on_table: np.ndarray, level: float = OUTLINE_COLOUR
@@ -670,6 +673,28 @@ def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
     return out
 
 
+def without_opaque_dropouts(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
+                            departure: np.ndarray) -> list[Candidate]:
+    """``found`` less the candidates that are an opaque object's dropouts: at least
+    :data:`OPAQUE_DROPOUTS` of the candidate lies in a :func:`standing_bodies` body that does
+    not show the table and that it holds less than :data:`BODY_JOINED` of (an opaque object, by
+    :func:`with_bodies`), and its own colour departs from the table's (median
+    :func:`table_colour_departure` ``(H, W)`` over :data:`OUTLINE_COLOUR`). A dark opaque object
+    drops out where it is darkest and is read smoothly elsewhere, so its holes are a candidate
+    with its colour; a glass's holes show the table through it (the real holders held less than
+    half by their candidates: median departure 1.0-1.5)."""
+    opaque = [body for body, sees_table in bodies if not sees_table]
+    out = []
+    for c in found:
+        area = int(c.mask.sum())
+        inside = [body for body in opaque if (c.mask & body).sum() >= OPAQUE_DROPOUTS * area]
+        if any((c.mask & body).sum() < BODY_JOINED * body.sum() for body in inside) and \
+                looks_opaque(c.mask, departure, OUTLINE_COLOUR):
+            continue
+        out.append(c)
+    return out
+
+
 def opaque_edges(glass: np.ndarray, opaque: np.ndarray, *, reach: int = EDGE_REACH,
                  share: float = EDGE_SHARE, thin: float = EDGE_THIN) -> np.ndarray:
     """Glass evidence ``(H, W) bool`` that belongs to an opaque object's edge: the connected
@@ -854,6 +879,7 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
                               close_radius=close_radius, min_area=min_area, standing=True,
                               fits=fits)
 
+    out = without_opaque_dropouts(out, bodies, departure)
     joined = with_bodies(out, bodies, glass | ev.above, one_object, parted, tests)
     # an object stands on the table; a band of dropouts along the table's edge, where the
     # table meets the room, is none: one lying mostly along the edge (with what lies beyond
