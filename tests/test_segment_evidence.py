@@ -666,6 +666,17 @@ def test_the_cleargrasp_holders_moved_right_by_a_pixel(realdata):
 
 
 @pytest.mark.slow
+def test_a_container_moved_down_and_right_keeps_off_the_table_up_to_its_far_edge(realdata):
+    """Tracebot view 027 moved one pixel down and right: the container's holes join the band
+    of dropouts along the table's far edge, and its instance holds the table between them
+    until it is cut to the hull of its colour outline. Measured: best IoU 0.67; with the
+    table's own edge (where its colour gives way to the room's, TABLE_LINE) counted as an
+    outline, the hull reaches the far edge and keeps that table: 0.46."""
+    best = _moved_scores(realdata.parent / "tracebot-dev", 1, 1, only="000027")
+    assert len(best) == 1 and best[0] >= 0.6
+
+
+@pytest.mark.slow
 def test_a_pitcher_near_the_tables_far_edge_keeps_to_its_outline(extsim):
     """extsim scene 9: a pitcher 2 cm in front of the table's far edge, where the room's colour
     departs from the table's along the whole edge. Measured: best IoU 0.85; grown to the

@@ -84,6 +84,8 @@ SHADOW_MIN_STEP, SHADOW_MIN_EDGES, SHADOW_SIGNATURE = 4.0, 20, 0.8  # casts_ster
 TABLE_EDGE_BAND, TABLE_EDGE_SHARE = 8, 0.5  # an instance with over this share of its pixels
 # within this many px of the table footprint's edge is a band of dropouts along it (measured on
 # the shared real frames: the far edge's bands 0.59-0.77, objects at most 0.20)
+TABLE_LINE = 3  # px either side of the table footprint's edge where its colour gives way to the
+# room's (colour smoothed over 3 px): no object's outline (within_outline_hull)
 TABLE_EDGE_TRIM = 32  # px from the table footprint's edge within which an instance keeps only
 # the columns above its feet in a stereo camera's frame: the dropouts along the edge spread
 # that far on the shared real frames once the 2x2 reduction keeps another reading of each
@@ -894,7 +896,11 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height, fits) for m in masks]
     if ev.stereo:  # a stereo camera's holes and bumps beside a glass: within its outline
         seen = beside_room(rgb, depth_m, footprint, departure, lab)
-        edges, own = outline_evidence(seen, on_table), own_pixels(seen, ev.height)
+        # where the table meets the room its colour gives way to the room's: that line is the
+        # table's own outline, and an instance holding the table up to its far edge would keep
+        # it all in its hull
+        edges = outline_evidence(seen, on_table) & ~along_table_edge(footprint, TABLE_LINE)
+        own = own_pixels(seen, ev.height)
         masks = [within_outline_hull(m, edges, own) for m in masks]
     found = [Candidate(m, c.score) for m, c in zip(masks, joined)]
     return _without_overlaps(lying_pieces_joined(found, K, plane, depth_m, glass, fits=fits))
