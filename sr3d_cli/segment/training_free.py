@@ -683,8 +683,8 @@ def without_opaque_dropouts(found: list[Candidate], bodies: list[tuple[np.ndarra
     :func:`with_bodies`), and its own colour departs from the table's (median
     :func:`table_colour_departure` ``(H, W)`` over :data:`OUTLINE_COLOUR`). A dark opaque object
     drops out where it is darkest and is read smoothly elsewhere, so its holes are a candidate
-    with its colour; a glass's holes show the table through it (the real holders held less than
-    half by their candidates: median departure 1.0-1.5)."""
+    with its colour; a glass's holes show the table through it (the real holders' candidates
+    that lie in such bodies depart 1.0-2.1)."""
     opaque = [body for body, sees_table in bodies if not sees_table]
     out = []
     for c in found:
