@@ -164,8 +164,36 @@ def fill_holes(mask: np.ndarray) -> np.ndarray:
 
 
 def _closed(mask: np.ndarray, radius: int) -> np.ndarray:
-    """``(H, W) bool`` closed with a disk of ``radius`` pixels and its holes filled."""
-    return fill_holes(cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, _disk(radius)) > 0)
+    """``(H, W) bool`` closed with a disk of ``radius`` pixels and its holes filled, the same
+    pixels, closed within the box of its set pixels widened by ``2 * radius + 1``: the
+    dilation reaches ``radius`` past that box, and the erosion, from a pixel the dilation set,
+    ``radius`` further, which stays inside it."""
+    out = np.zeros(mask.shape, bool)
+    box = mask_window(mask, 2 * radius + 1)
+    if box is not None:
+        out[box] = cv2.morphologyEx(np.asarray(mask[box], np.uint8), cv2.MORPH_CLOSE,
+                                    _disk(radius)) > 0
+    return fill_holes(out)
+
+
+def _cut_window(region: np.ndarray, margin: int) -> tuple[slice, slice]:
+    """:func:`mask_window` of a region ``(H, W) bool`` (not empty) widened by ``margin``
+    pixels and, up and left, to even coordinates, where its cuts are worked out: nothing
+    they are made of (distances to the region's edge or to seeds inside it, openings,
+    watersheds) reaches past it, and cv2 numbers components in 2x2 blocks from the image's
+    corner, so that a window whose blocks line up with the image's numbers them alike."""
+    rows, cols = mask_window(region, margin)
+    return (slice(rows.start - rows.start % 2, rows.stop),
+            slice(cols.start - cols.start % 2, cols.stop))
+
+
+def _embedded(window: np.ndarray, box: tuple[slice, slice], shape: tuple[int, int],
+              beyond: bool = False) -> np.ndarray:
+    """``(H, W) bool`` of ``shape``: ``window`` ``(h, w) bool`` at ``box``, ``beyond``
+    elsewhere."""
+    out = np.full(shape, beyond)
+    out[box] = window
+    return out
 
 
 def _disk(radius: int) -> np.ndarray:
@@ -1276,7 +1304,7 @@ def _footprint_cut(region: np.ndarray, xs: np.ndarray, ys: np.ndarray, raw: np.n
     of the feet along their principal direction (a few stray readings far off do not take a
     group of their own); a cut is made when the groups' centres are ``min_apart`` metres
     apart, each pixel going with its nearest reading's group (each part at least ``min_area``
-    pixels). None otherwise."""
+    pixels; the parts made within the region's :func:`_cut_window`). None otherwise."""
     if len(xs) < 2:
         return None
     pts = unproject(np.column_stack([xs, ys]).astype(np.float64), raw, K)
@@ -1291,17 +1319,19 @@ def _footprint_cut(region: np.ndarray, xs: np.ndarray, ys: np.ndarray, raw: np.n
         c = [foot[~side].mean(0), foot[side].mean(0)]
     if np.linalg.norm(c[0] - c[1]) < min_apart:
         return None
-    seeds = np.zeros(region.shape, np.uint8)
-    seeds[ys, xs] = np.where(side, 2, 1)
-    first = region & (_nearest_seed(seeds) == 1)
+    box = _cut_window(region, 1)
+    inner = region[box]
+    seeds = np.zeros(inner.shape, np.uint8)
+    seeds[ys - box[0].start, xs - box[1].start] = np.where(side, 2, 1)
+    first = inner & (_nearest_seed(seeds) == 1)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(first.astype(np.uint8), 8)
     if count < 2:
         return None
     a = labels == 1 + int(np.argmax(stats[1:, 4]))
-    b = region & ~a
+    b = inner & ~a
     if min(a.sum(), b.sum()) < min_area:
         return None
-    return a, b
+    return _embedded(a, box, region.shape), _embedded(b, box, region.shape)
 
 
 class _PartFits:
@@ -1430,21 +1460,29 @@ def _outline_cuts(region: np.ndarray, glass: np.ndarray | None, max_pieces: int,
     two connected parts, each at least ``min_share`` of the region, then the cuts between the
     ``glass`` evidence's bodies (:func:`_evidence_cuts`, parts at least ``min_area``). Returns
     the cuts and the range of their indices that cut one body from all the rest (ranked below
-    the others)."""
-    labels, n, length = _pieces(region, max_pieces)
+    the others). All are made within the region's :func:`_cut_window` widened by the reach of
+    :func:`_closed` (``2 * close_radius + 1``), which closes the evidence's bodies."""
+    box = _cut_window(region, 2 * close_radius + 1)
+    inner = region[box]
+    labels, n, length = _pieces(inner, max_pieces)
+    # the watershed's label around the region, 0 or, where no seed reached a part of the
+    # region, that part's piece (see _pieces), is the label of all beyond the window too
+    around = labels[~inner][:1]
     area = float(region.sum())
     cuts = []
     for bits in range(1, 2 ** (n - 1)):  # piece n stays in the second part
         first = [k for k in range(1, n + 1) if bits >> (k - 1) & 1]
         second = [k for k in range(1, n + 1) if k not in first]
         if _connected(first, length) and _connected(second, length):
-            a = np.isin(labels, first)
+            a = _embedded(np.isin(labels, first), box, region.shape,
+                          bool(np.isin(around, first).any()))
             if min(a.sum(), area - a.sum()) >= min_share * area:
                 cuts.append((a, region & ~a))
     rests = range(0)
     if glass is not None:
-        plain, rest = ([(a, b) for a, b in found if min(a.sum(), b.sum()) >= min_area]
-                       for found in _evidence_cuts(region, glass, min_area, close_radius))
+        plain, rest = ([(_embedded(a, box, region.shape), _embedded(b, box, region.shape))
+                        for a, b in found if min(a.sum(), b.sum()) >= min_area]
+                       for found in _evidence_cuts(inner, glass[box], min_area, close_radius))
         cuts += plain
         rests = range(len(cuts), len(cuts) + len(rest))
         cuts += rest
@@ -1455,12 +1493,17 @@ def _readings_cuts(region: np.ndarray, readings: _RegionReadings, K: np.ndarray,
                    min_area: int) -> tuple[tuple[np.ndarray, np.ndarray] | None,
                                            list[tuple[np.ndarray, np.ndarray]]]:
     """The cuts only the readings can hold: the footprint cut (:func:`_footprint_cut`, or None)
-    and each thin part hanging off the body (:func:`_attachments`) cut at its bridge."""
+    and each thin part hanging off the body (:func:`_attachments`) cut at its bridge, made
+    within the region's :func:`_cut_window`."""
     footprint = _footprint_cut(region, *readings.every, K, plane, FOOTPRINT_APART, min_area)
-    body, thin = _attachments(region, min_area)
+    box = _cut_window(region, 1)
+    inner = region[box]
+    body, thin = _attachments(inner, min_area)
     attached = []
     if thin and cv2.connectedComponents(body.astype(np.uint8), connectivity=8)[0] == 2:
-        attached = [(a, region & ~a & ~_bridge(region, body, thin, a)) for a in thin]
+        attached = [(_embedded(a, box, region.shape),
+                     _embedded(inner & ~a & ~_bridge(inner, body, thin, a), box, region.shape))
+                    for a in thin]
     return footprint, attached
 
 
