@@ -44,11 +44,12 @@ class RenderMesh:
 @dataclass
 class RenderOutput:
     """depth : (H, W) float32 metres, 0 = empty; ids : (H, W) int32, 0 = empty;
-    normals : (H, W, 3) float32 unit normals in the camera frame, 0 where empty."""
+    normals : (H, W, 3) float32 unit normals in the camera frame, 0 where empty (None where
+    the render was asked for depth and ids only)."""
 
     depth: np.ndarray
     ids: np.ndarray
-    normals: np.ndarray
+    normals: np.ndarray | None
 
     def grey(self, light_cam: np.ndarray = (0.0, 0.0, -1.0)) -> np.ndarray:
         """Shaded grey image ``(H, W) uint8``: two-sided Lambert, light from ``light_cam``."""
@@ -67,7 +68,10 @@ def opencv_to_opengl(T_cv: np.ndarray) -> np.ndarray:
 class Renderer:
     name = "base"
 
-    def render(self, meshes: list[RenderMesh], camera: Camera) -> RenderOutput:
+    def render(self, meshes: list[RenderMesh], camera: Camera,
+               normals: bool = True) -> RenderOutput:
+        """The meshes' depth and ids as ``camera`` sees them, and with ``normals`` their
+        normals (shading, simulated sensors); a repaired depth needs depth and ids only."""
         raise NotImplementedError
 
 
@@ -97,7 +101,8 @@ class NumpyRenderer(Renderer):
     name = "numpy"
     CHUNK = 200_000  # candidate pixels processed at once
 
-    def render(self, meshes, camera):
+    def render(self, meshes, camera, normals=True):
+        want = normals  # the name is taken by the normal image below
         h, w = camera.height, camera.width
         K = camera.K
         all_pix, all_z, all_n, all_id = [], [], [], []
@@ -141,7 +146,7 @@ class NumpyRenderer(Renderer):
             nn = np.concatenate(all_n)[pick]
             nn /= np.maximum(np.linalg.norm(nn, axis=1, keepdims=True), 1e-12)
             normals.reshape(-1, 3)[pix] = nn
-        return RenderOutput(depth, ids, normals)
+        return RenderOutput(depth, ids, normals if want else None)
 
     def _rasterise(self, data: np.ndarray, K: np.ndarray, h: int, w: int):
         """Candidate fragments of triangles ``data (m, 3, 6)`` (xyz, normal per corner)."""
@@ -266,9 +271,10 @@ class PyrenderRenderer(Renderer):
             self._renderers[(w, h)] = self.pyrender.OffscreenRenderer(w, h)
         return self._renderers[(w, h)]
 
-    def render(self, meshes, camera):
+    def render(self, meshes, camera, normals=True):
         import trimesh
 
+        want = normals  # the name is taken by each mesh's normals below
         pr = self.pyrender
         h, w = camera.height, camera.width
         scene = pr.Scene(bg_color=[0.5, 0.5, 0.5, 1.0], ambient_light=[1.0, 1.0, 1.0])
@@ -300,17 +306,20 @@ class PyrenderRenderer(Renderer):
         # the SEG pass is not: depth and ids come from it. Normals come from the colour pass;
         # its background 0.5 decodes to a zero normal, so partly covered silhouette pixels come
         # out short, and _fill_partial_normals replaces them.
-        colour, _ = r.render(scene, flags=flags.FLAT | flags.SKIP_CULL_FACES)
+        # (without normals the colour pass is left out: a repaired depth needs depth and ids)
+        colour = r.render(scene, flags=flags.FLAT | flags.SKIP_CULL_FACES)[0] if want else None
         seg, depth = r.render(scene, flags=flags.SEG | flags.SKIP_CULL_FACES,
                               seg_node_map=seg_map)
         ids = seg[..., 0].astype(np.int32) + 256 * seg[..., 1].astype(np.int32)
         depth = np.asarray(depth, dtype=np.float32)
-        normals = colour[..., :3].astype(np.float32) / 255.0 * 2.0 - 1.0
-        normals = _fill_partial_normals(normals, ids)
         empty = depth <= 0
-        normals[empty] = 0
+        shade = None
+        if colour is not None:
+            shade = colour[..., :3].astype(np.float32) / 255.0 * 2.0 - 1.0
+            shade = _fill_partial_normals(shade, ids)
+            shade[empty] = 0
         ids[empty] = 0
-        return RenderOutput(depth, ids, normals)
+        return RenderOutput(depth, ids, shade)
 
 
 _CACHE: dict[str, Renderer] = {}

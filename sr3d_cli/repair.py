@@ -119,7 +119,7 @@ def repair_frame(raw_m: np.ndarray, ids: np.ndarray, camera: Camera, renderer: R
                  beyond_mask: bool = False, keep_nearer: bool = False) -> np.ndarray:
     if not placed:
         return raw_m.astype(np.float32).copy()
-    render = renderer.render(placed_render_meshes(placed), camera)
+    render = renderer.render(placed_render_meshes(placed), camera, normals=False)
     return compose_depth(raw_m, ids, render.depth, [p[0] for p in placed], plane=plane,
                          K=camera.K, outside_render=outside_render, beyond_mask=beyond_mask,
                          keep_nearer=keep_nearer)

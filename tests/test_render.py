@@ -55,6 +55,21 @@ def test_backends_agree_on_depth_ids_and_normals():
     assert np.median(np.degrees(np.arccos(np.clip(cos, -1, 1)))) < 1.0
 
 
+@pytest.mark.parametrize("backend", ["numpy", "pyrender"])
+def test_a_render_without_normals_has_the_same_depth_and_ids(backend):
+    """What a repaired depth asks for (normals=False): the same depth and ids to the bit, no
+    normals (pyrender leaves its colour pass out)."""
+    try:
+        renderer = make_renderer(backend)
+    except Exception as exc:  # pragma: no cover - machines without EGL/OSMesa
+        pytest.skip(f"no OpenGL context here ({exc})")
+    full = renderer.render(_scene(), CAM)
+    bare = renderer.render(_scene(), CAM, normals=False)
+    assert bare.normals is None and full.normals is not None
+    assert np.array_equal(bare.depth, full.depth) and np.array_equal(bare.ids, full.ids)
+    assert (full.ids == 1).sum() > 1000
+
+
 def test_auto_falls_back_to_numpy_with_one_notice(monkeypatch, caplog):
     import sr3d_cli.render as render
 

@@ -66,7 +66,7 @@ def check_frame(source: SceneSource, frame_id: str, renderer: Renderer | None = 
         verts = place_points(mesh.vertices, T, float(obj["scale"]))
         meshes.append(RenderMesh(verts, mesh.faces, int(obj["id"])))
     if renderer is not None and meshes:
-        out = renderer.render(meshes, frame.camera)
+        out = renderer.render(meshes, frame.camera, normals=False)
         # only where the object is really in front (occluders are not listed in gt/objects)
         visible = (out.depth > 0) & (out.depth <= np.where(gt > 0, gt, np.inf) + 0.005)
         for m in meshes:
