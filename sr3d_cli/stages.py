@@ -182,6 +182,7 @@ class FrameState:
         self._instances: tuple[np.ndarray, dict[int, dict]] | None = None
         self._plane: tuple[Plane | None, str | None] | None = None
         self._seen: np.ndarray | None = None
+        self._occluders: dict[int, np.ndarray | None] = {}
         self._made: dict[int, tuple[trimesh.Trimesh, dict, trimesh.Trimesh | None]] | None = None
         self._read: dict[int, trimesh.Trimesh] = {}
         self._poses: dict | None = None
@@ -205,6 +206,7 @@ class FrameState:
         """The instances segment made: ids ``(H, W) int32``, one record per id."""
         self._instances = (ids, instance_records(ids, objects))
         self._plane = self._seen = None  # fitted with the objects left out; made from them
+        self._occluders = {}
 
     def plane(self) -> tuple[Plane | None, str | None]:
         """The table with the instances left out (:func:`frame_plane`), or (None, why): fitted
@@ -224,6 +226,16 @@ class FrameState:
             self._seen = ids if plane is None else opaque_objects(
                 ids, self.frame.depth_m, self.frame.camera.K, plane)
         return self._seen
+
+    def occluders(self, k: int) -> np.ndarray | None:
+        """Pixels ``(H, W) bool`` of what stands in front of instance ``k`` near it
+        (:func:`occluders` on :meth:`seen`), None where nothing does or there is no table.
+        Made once per instance, for reconstruct and align."""
+        if k not in self._occluders:
+            plane = self.plane()[0]
+            self._occluders[k] = None if plane is None else \
+                occluders(self.seen(), k, self.frame.camera.K, plane)
+        return self._occluders[k]
 
     def reconstructed(self, made: dict[int, tuple[trimesh.Trimesh, dict,
                                                   trimesh.Trimesh | None]]) -> None:
@@ -344,12 +356,11 @@ def reconstruct_frame(state: FrameState, reconstructor, record: dict | None = No
     ids, records = state.instances()
     plane, why = state.plane()
     problems, made, kept = [], {}, {}
-    seen = state.seen()
     for k in sorted(records):
         try:
             if plane is None and reconstructor.needs_plane:
                 raise ValueError(why)
-            front = None if plane is None else occluders(seen, k, frame.camera.K, plane)
+            front = state.occluders(k)
             result = reconstructor(frame.rgb, ids == k, frame.camera.K, plane,
                                    records[k].get("label", ""), frame.depth_m, front)
         except ValueError as exc:  # ObjectError, and model/fit failures of this object
@@ -401,7 +412,6 @@ def align_frame(state: FrameState, aligner, record: dict | None = None
     ids, records = state.instances()
     plane, why = state.plane()
     objects, problems = [], []
-    seen = state.seen()
     for k in sorted(records):
         if not state.has_mesh(k):
             problems.append(Problem("no mesh: run `sr3d reconstruct` first", k, upstream=True))
@@ -411,7 +421,7 @@ def align_frame(state: FrameState, aligner, record: dict | None = None
                 raise ValueError(why)
             placement = aligner(state.mesh(k), ids == k, frame.camera.K, plane, frame.depth_m,
                                 hint=state.pose_hint(k),
-                                occluders=occluders(seen, k, frame.camera.K, plane))
+                                occluders=state.occluders(k))
         except ValueError as exc:
             problems.append(Problem(str(exc), k))
             continue

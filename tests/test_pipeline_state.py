@@ -33,15 +33,18 @@ def test_repair_depth_in_memory_matches_the_stages_run_alone(synth_set, tmp_path
     scene = synth_set / "scene_0002"
     runner = CliRunner()
     calls: Counter = Counter()
-    for name in ("load_instances", "load_mesh", "load_pose_document"):
+    for name in ("load_instances", "load_mesh", "load_pose_document", "occluders"):
         _counting(monkeypatch, calls, stages, name)
     _counting(monkeypatch, calls, plane_module, "fit_support_plane")
     together = tmp_path / "together"
     result = runner.invoke(cli, ["repair-depth", str(scene), "--out", str(together), "-q"])
     assert result.exit_code == 0, result.output
     # the segmenter's table at its working size, then one for reconstruct, align and repair;
-    # no mask, mesh or pose file read back
-    assert calls == Counter(fit_support_plane=2)
+    # what stands in front of each instance once, for reconstruct and align; no mask, mesh
+    # or pose file read back
+    instances = json.loads((together / "masks" / "000000.json").read_text())["objects"]
+    assert len(instances) >= 2
+    assert calls == Counter(fit_support_plane=2, occluders=len(instances))
     monkeypatch.undo()
 
     alone = tmp_path / "alone"
