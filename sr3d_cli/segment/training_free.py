@@ -713,13 +713,13 @@ def without_opaque_dropouts(found: list[Candidate], bodies: list[tuple[np.ndarra
     drops out where it is darkest and is read smoothly elsewhere, so its holes are a candidate
     with its colour; a glass's holes show the table through it (the real holders' candidates
     that lie in such bodies depart 1.0-2.1)."""
-    opaque = [body for body, sees_table in bodies if not sees_table]
+    opaque = [(body, int(body.sum())) for body, sees_table in bodies if not sees_table]
     out = []
     for c in found:
         area = int(c.mask.sum())
-        inside = [body for body in opaque if (c.mask & body).sum() >= OPAQUE_DROPOUTS * area]
-        if any((c.mask & body).sum() < BODY_JOINED * body.sum() for body in inside) and \
-                looks_opaque(c.mask, departure, OUTLINE_COLOUR):
+        shared = [(int((c.mask & body).sum()), size) for body, size in opaque]
+        if any(both >= OPAQUE_DROPOUTS * area and both < BODY_JOINED * size
+               for both, size in shared) and looks_opaque(c.mask, departure, OUTLINE_COLOUR):
             continue
         out.append(c)
     return out
