@@ -269,6 +269,23 @@ def test_an_outline_is_read_where_it_is_allowed_to_show():
     assert tf.shows_outline(patch, rimmed, over_table)
 
 
+def test_the_image_border_is_no_outline():
+    """A patch of dropouts on a plain table at the image's bottom edge, whose colour departs
+    only in the rows along the border (smoothing against the edge): no outline. The same
+    patch with a rim along its top, away from the border, shows one."""
+    departure = np.zeros((60, 80), np.float32)
+    departure[-3:] = 10.0
+    patch = np.zeros((60, 80), bool)
+    patch[45:, 20:40] = True
+    band = (cv2.dilate(patch.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0) & \
+        ~(cv2.erode(patch.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0)
+    assert (departure[band] > tf.FAINT_COLOUR).mean() >= tf.FAINT_SHARE  # counted in full
+    assert not tf.shows_outline(patch, departure)
+    rimmed = departure.copy()
+    rimmed[43:46, 20:40] = 4.0
+    assert tf.shows_outline(patch, rimmed)
+
+
 def test_an_outline_is_followed_round_a_rim_but_not_into_other_objects():
     """An open vessel seen from above: its instance is the front arc of the rim (its holes),
     the rim's ellipse (the colour outline) reaches 65 px above it, the floor shows the table.
