@@ -872,10 +872,11 @@ def _far_edge_scene(band_columns: tuple[int, int], glass_at: tuple[int, int, int
 
 def test_a_band_of_dropouts_along_the_tables_far_edge_is_no_object(monkeypatch):
     """Where the table ends against the room, a stereo camera often leaves a ragged band of
-    holes along the edge: it is no object, twice over: it shows no outline over the table
-    (the room's colour beyond the edge does not count) and over half its pixels lie within
-    TABLE_EDGE_BAND px of the table footprint's edge; a glass on the table still is. Without
-    both rules the band comes out as an instance; with either one, it does not."""
+    holes along the edge: it is no object, on three counts: it shows no outline over the
+    table (the room's colour beyond the edge does not count), over half its pixels lie within
+    TABLE_EDGE_BAND px of the table footprint's edge, and so does most of its part over the
+    table (TABLE_CLEAR_SHARE); a glass on the table still is. Without the three rules the
+    band comes out as an instance; with any one of them, it does not."""
     from sr3d_cli.segment import training_free
 
     K, plane, depth, rgb, band, glass = _far_edge_scene((40, 140), (200, 150, 30, 45))
@@ -891,8 +892,13 @@ def test_a_band_of_dropouts_along_the_tables_far_edge_is_no_object(monkeypatch):
                         lambda mask, departure, within=None: shows(mask, departure))
     assert on_band() == []
     monkeypatch.setattr(training_free, "TABLE_EDGE_SHARE", 1.0)
+    assert on_band() == []
+    monkeypatch.setattr(training_free, "TABLE_CLEAR_SHARE", 0.0)
     found = on_band()
     assert len(found) == 1 and (found[0] & band).sum() > 0.5 * band.sum()
+    monkeypatch.setattr(training_free, "TABLE_EDGE_SHARE", 0.5)
+    assert on_band() == []
+    monkeypatch.setattr(training_free, "TABLE_EDGE_SHARE", 1.0)
     monkeypatch.setattr(training_free, "shows_outline", shows)
     assert on_band() == []
 

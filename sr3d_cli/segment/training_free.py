@@ -84,6 +84,11 @@ SHADOW_MIN_STEP, SHADOW_MIN_EDGES, SHADOW_SIGNATURE = 4.0, 20, 0.8  # casts_ster
 TABLE_EDGE_BAND, TABLE_EDGE_SHARE = 8, 0.5  # an instance with over this share of its pixels
 # within this many px of the table footprint's edge is a band of dropouts along it (measured on
 # the shared real frames: the far edge's bands 0.59-0.77, objects at most 0.20)
+TABLE_CLEAR_SHARE = 0.65  # least share of an instance's part over the table's footprint that
+# lies clear of that band (the shared real frames as given, moved by a pixel, at 640x480 and
+# beside themselves: objects 0.88-1.0, the room's dropouts beyond the far edge joined to the
+# band 0.45-0.59; a small generated glass near a far edge made by dropping every reading
+# above a row 0.73)
 TABLE_LINE = 3  # px either side of the table footprint's edge where its colour gives way to the
 # room's (colour smoothed over 3 px): no object's outline (within_outline_hull)
 TABLE_EDGE_TRIM = 32  # px from the table footprint's edge within which an instance keeps only
@@ -919,12 +924,15 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     joined = with_bodies(out, bodies, glass | ev.above, one_object, parted, tests)
     # an object stands on the table; a band of dropouts along the table's edge, where the
     # table meets the room, is none: one lying mostly along the edge (with what lies beyond
-    # the table above its whole span) is dropped, and beyond the table or along its edge the
-    # others keep only the columns above their feet (the holes on the table beside a glass
-    # at the far edge join the room's above them; the band a stereo camera leaves along the
-    # edge reaches TABLE_EDGE_TRIM into the table)
+    # the table above its whole span), or whose part over the table lies mostly in that band
+    # (the room's dropouts beyond the far edge joined to it), is dropped, and beyond the table
+    # or along its edge the others keep only the columns above their feet (the holes on the
+    # table beside a glass at the far edge join the room's above them; the band a stereo
+    # camera leaves along the edge reaches TABLE_EDGE_TRIM into the table)
     masks = [within_table_columns(c.mask, over_table) for c in joined]
-    keep = [i for i, m in enumerate(masks) if not m.any() or edge[m].mean() <= TABLE_EDGE_SHARE]
+    keep = [i for i, m in enumerate(masks) if not m.any() or (
+        edge[m].mean() <= TABLE_EDGE_SHARE and
+        (m & over_table).sum() >= TABLE_CLEAR_SHARE * (m & footprint).sum())]
     masks = [within_table_columns(masks[i], off_edge, feet=FEET_SHARE) for i in keep]
     joined = [joined[i] for i in keep]
     masks = [with_parts_on_axis(m, K, plane, depth_m, ev.height, fits) for m in masks]
