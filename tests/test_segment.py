@@ -387,15 +387,19 @@ def test_a_lying_glass_behind_a_standing_one_is_split_and_the_standing_one_kept_
         tmp_path, monkeypatch, rule, value, worst):
     """Generated frame (seed 5100, frame 18): a lying glass behind a standing one, one region
     a standing solid draws (IoU .86). Their footprint cut draws both better (.96, .90; mean
-    +.06) and the lying glass's fit holds 33% of its readings, the whole's none: short of
-    OWN_READINGS, enough with the outline's gain (else: IoUs .58 / .38). The standing glass's
-    top, where the lying one crosses, then fits better cut off, but its fit holds none of that
-    part's readings and the whole's 12%: the outline does not hold that cut (else: .66)."""
+    +.06), so the outline holds it; and the lying glass's fit holds 33% of its readings, the
+    whole's none: short of OWN_READINGS, enough with the outline's gain, so the readings hold
+    it too (taken as a region the image's border cuts, where only the readings may hold a
+    footprint cut, and without that rule: IoUs .58 / .38). The standing glass's top, where
+    the lying one crosses, then fits better cut off, but its fit holds none of that part's
+    readings and the whole's 12%: the outline does not hold that cut (else: .66)."""
     from sr3d_cli.segment import training_free
 
     _, frame, gt = generated_frame(tmp_path, 5100, 18)
     if rule:
         monkeypatch.setattr(training_free, rule, value)
+    if rule == "OUTLINE_OWN_READINGS":
+        monkeypatch.setattr(training_free, "_on_image_border", lambda mask: True)
     found = _segmented_ious(frame, gt)
     glasses = found[1], found[3]  # standing, lying
     assert (min(glasses) > worst) if rule is None else (min(glasses) < worst)
