@@ -739,19 +739,26 @@ def test_touching_vessels_part_where_their_readings_stand_apart(extsim, monkeypa
     """extsim scene 0: a glass bowl, a wine glass and a lying cup in front of them, one region
     with no neck between them for the watershed. Their readings' feet on the table stand
     apart, and the cut between the two groups draws the region better (parts 0.82 / 0.72
-    against 0.70): it holds by the outline. Measured: best IoU 0.51 (wine glass), 0.35
-    (bowl), 0.94 (cup): the cup parted, the wine glass and the bowl joined again as pieces of
-    one lying object; with the readings' cut left out, one instance of all three: 0.49, 0.33,
-    0.17."""
+    against 0.70): it holds by the outline. The bowl and the wine glass then draw 0.05 better
+    as one lying object than as two, short of the clear gain that joins what such a cut
+    parted. Measured: best IoU 0.84 (wine glass), 0.80 (bowl), 0.94 (cup); joined again at
+    any gain, 0.51 and 0.35; with the readings' cut left out, one instance of all three: 0.49,
+    0.33, 0.17."""
     from sr3d_cli.segment import training_free
 
-    best = _extsim_ious(extsim, "scene_0000")["scene_0000"]
-    assert len(best) == 3 and best[3] >= 0.9 and sum(v >= 0.5 for v in best.values()) >= 2
+    def best():
+        return _extsim_ious(extsim, "scene_0000")["scene_0000"]
+
+    assert min(best().values()) >= 0.75
+    joined = training_free.lying_pieces_joined
+    monkeypatch.setattr(training_free, "lying_pieces_joined",
+                        lambda *args, apart=(), **kwargs: joined(*args, **kwargs))
+    found = best()
+    assert found[3] >= 0.9 and max(found[1], found[2]) < 0.6
     cuts = training_free._readings_cuts
     monkeypatch.setattr(training_free, "_readings_cuts",
                         lambda *args: (None, cuts(*args)[1]))
-    best = _extsim_ious(extsim, "scene_0000")["scene_0000"]
-    assert max(best.values()) < 0.5
+    assert max(best().values()) < 0.5
 
 
 def _extsim_ious(root, *names: str) -> dict[str, dict[int, float]]:
