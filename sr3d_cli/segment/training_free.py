@@ -126,6 +126,12 @@ BODY_JOINED = 0.5  # share of a body that does not show the table one instance m
 # body to join it: the glass's lower part, read smoothly (ClearGrasp 123's holders: 0.56 and 0.66
 # held, 87-89% of each body inside its holder; an earphone case beside a false instance: 0.20)
 BODY_SHARED = 0.1  # share of a body each of two instances holding it makes it touching objects
+BODY_CUT = 0.25  # share of a body each part of a cut holds where the cut runs through it
+SURFACE_STEP = 0.01  # metres: the median step in depth across a cut between a body's readings
+# either side of it under which they are one surface (_one_surface)
+SURFACE_ACROSS = 0.3  # pairs of neighbouring readings across such a cut, per column of the
+# body: a cut across a container's read body (0.36-0.47 on the Tracebot views) against two
+# objects whose readings meet where they touch (generated goblet and lying beaker 0.08-0.25)
 OPAQUE_DROPOUTS = 0.5  # share of an instance inside an opaque body that makes it that body's
 # dropouts (without_opaque_dropouts; ClearGrasp 123's earphone case: 0.54-0.69 in every view)
 SEE_THROUGH_WINDOW = 91  # pixels: the table's colour around a body is taken beyond its width
@@ -685,7 +691,9 @@ def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
     (:data:`BODY_INSIDE`) is a part of it and adds nothing. A body that one candidate overlaps
     less is joined to it: that candidate's glass evidence covered only the part of the object
     the sensor failed on, unless the join is no longer ``one_object`` (a callable on an
-    ``(H, W) bool`` mask: :func:`splits` finds no cut); then the body's part beyond that
+    ``(H, W) bool`` mask and the body: :func:`splits` finds no cut but through the body's
+    own surface, as where a container's lid's holes join its read body, Tracebot views 053
+    and 079 moved by a pixel); then the body's part beyond that
     candidate is another object touching it, new like a body overlapping none where it
     passes ``tests`` itself (:class:`BodyTests`) and shows the table (a container read
     smoothly beside the holes on its lid; not a notebook that joined a glass's body, flat and
@@ -709,7 +717,7 @@ def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
             others = [c.mask for i, c in enumerate(out) if i != j and overlap[i] > 0]
             free = body & ~np.any(others, axis=0) if others else body
             joined = out[j].mask | free
-            if one_object(joined):
+            if one_object(joined, body):
                 out[j] = Candidate(joined, out[j].score)
             elif tests is not None:
                 rest = free & ~out[j].mask
@@ -917,9 +925,9 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     tests = BodyTests(rgb, depth_m, ev, min_area=least, lab=lab)
     bodies = standing_bodies(depth_m, ev, K, plane, tests, close_radius=close_radius)
 
-    def one_object(mask: np.ndarray) -> bool:
+    def one_object(mask: np.ndarray, body: np.ndarray) -> bool:
         return not splits(mask, K, plane, depth=depth_m, glass=glass,
-                          close_radius=close_radius, min_area=min_area, fits=fits)
+                          close_radius=close_radius, min_area=min_area, fits=fits, body=body)
 
     def parted(mask: np.ndarray) -> list[np.ndarray]:
         return split_touching(mask, K, plane, depth=depth_m, glass=glass,
@@ -1805,14 +1813,47 @@ def split_touching(region: np.ndarray, K: np.ndarray, plane: Plane, *,
 
 def splits(region: np.ndarray, K: np.ndarray, plane: Plane, *, depth: np.ndarray | None = None,
            glass: np.ndarray | None = None, close_radius: int = 6, min_area: int = 150,
-           fits: "_PartFits | None" = None) -> bool:
+           fits: "_PartFits | None" = None, body: np.ndarray | None = None) -> bool:
     """Whether :func:`split_touching` (default rules) cuts ``region`` ``(H, W) bool`` at all:
     true at the first cut that holds, without judging the rest or splitting the parts.
-    ``fits``: the frame's fits (:class:`_PartFits`), made here when not given."""
+    ``fits``: the frame's fits (:class:`_PartFits`), made here when not given. ``body``:
+    an ``(H, W) bool`` body of readings in the region (:func:`standing_bodies`); a cut that
+    runs through it is passed over: each part holds :data:`BODY_CUT` of it and its readings
+    are one surface across the cut (:func:`_one_surface`, with raw ``depth`` metres). A
+    container read smoothly below the holes on its lid fits better as a lid and a body (lying
+    0.90 and standing 0.89 against 0.85, Tracebot view 053 moved by a pixel); a glass and the
+    notebook its body's readings reach hold the notebook on one side, and a bottle and the
+    boxes its readings touch step in depth between them."""
     fits = _PartFits(K, plane, depth) if fits is None else fits
-    return any(True for _ in _held_cuts(region, K, plane, depth, glass, close_radius,
-                                        SPLIT_PIECES, SPLIT_GAIN, SPLIT_SHARE, min_area, None,
-                                        fits))
+    for _, ((a, _), (b, _)) in _held_cuts(region, K, plane, depth, glass, close_radius,
+                                          SPLIT_PIECES, SPLIT_GAIN, SPLIT_SHARE, min_area, None,
+                                          fits):
+        if body is None or depth is None or not _one_surface(a, b, body, depth):
+            return True
+    return False
+
+
+def _one_surface(a: np.ndarray, b: np.ndarray, body: np.ndarray, depth: np.ndarray) -> bool:
+    """Whether a cut into ``a`` and ``b`` ``(H, W) bool`` runs through the readings of one
+    surface of ``body`` ``(H, W) bool``: each part holds :data:`BODY_CUT` of the body, the
+    body's readings meet across the cut in :data:`SURFACE_ACROSS` pairs of neighbours per
+    column of the body (at least 5), and the median step in ``depth`` ``(H, W)`` metres
+    between them is under :data:`SURFACE_STEP`. Two objects touching meet at their contact
+    only, where their surfaces are at one depth too."""
+    size = body.sum()
+    if min((a & body).sum(), (b & body).sum()) < BODY_CUT * size:
+        return False
+    read = body & (depth > 0)
+    on_a, on_b = a & read, b & read
+    steps = []
+    for first, second in (((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+                          ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):
+        for x, y in ((on_a, on_b), (on_b, on_a)):
+            pair = x[first] & y[second]
+            steps.append(np.abs(depth[first][pair] - depth[second][pair]))
+    steps = np.concatenate(steps)
+    across = max(5.0, SURFACE_ACROSS * float(body.any(axis=0).sum()))
+    return len(steps) >= across and float(np.median(steps)) < SURFACE_STEP
 
 
 def _held_cuts(region: np.ndarray, K: np.ndarray, plane: Plane, depth, glass, close_radius: int,
