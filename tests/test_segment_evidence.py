@@ -704,9 +704,7 @@ def test_the_rooms_dropouts_joined_to_the_far_edges_band_are_no_object(realdata,
     from sr3d_cli.segment import training_free
 
     def found():
-        ((ids, truth),) = _moved_segments(realdata.parent / "tracebot-dev", 1, 0, "000027")
-        return [instance_ious(truth, (ids == k).astype(np.int32))[1]
-                for k in np.unique(ids[ids > 0])]
+        return _instances_best(realdata.parent / "tracebot-dev", 1, 0, "000027")
 
     ious = found()
     assert len(ious) == 1 and ious[0] >= 0.7
@@ -726,9 +724,7 @@ def test_a_containers_lid_and_its_read_body_are_one_instance(realdata, monkeypat
     from sr3d_cli.segment import training_free
 
     def found():
-        ((ids, truth),) = _moved_segments(realdata.parent / "tracebot-dev", 1, 1, "000053")
-        return [instance_ious(truth, (ids == k).astype(np.int32))[1]
-                for k in np.unique(ids[ids > 0])]
+        return _instances_best(realdata.parent / "tracebot-dev", 1, 1, "000053")
 
     ious = found()
     assert len(ious) == 1 and ious[0] >= 0.72
@@ -855,6 +851,13 @@ def _moved_segments(root, down: int, right: int, only: str = ""
             inst = segmenter(fid, moved(frame.rgb), moved(frame.depth_m), K)
             out.append((inst.ids, moved(truth)))
     return out
+
+
+def _instances_best(root, down: int, right: int, only: str) -> list[float]:
+    """Each instance's best IoU with a true object, in the one frame of
+    :func:`_moved_segments`."""
+    ((ids, truth),) = _moved_segments(root, down, right, only)
+    return [instance_ious(truth, (ids == k).astype(np.int32))[1] for k in np.unique(ids[ids > 0])]
 
 
 def _moved_scores(root, down: int, right: int, only: str = "") -> list[float]:
