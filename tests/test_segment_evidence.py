@@ -694,43 +694,34 @@ def test_a_container_moved_down_and_right_keeps_off_the_table_up_to_its_far_edge
 
 
 @pytest.mark.slow
-def test_the_rooms_dropouts_joined_to_the_far_edges_band_are_no_object(realdata, monkeypatch):
-    """Tracebot view 027 moved one pixel down: the room's dropouts beyond the table's far edge
-    join the band of holes along it, and their part over the table lies mostly in that band
-    (0.59 of it clear of the TABLE_EDGE_BAND px along the footprint's edge; the container's
-    0.88-1.0).
-    Measured: one instance, the container's (IoU 0.76); with no share of the part over the
-    table required to lie clear of the band, a second one there, on no object."""
+@pytest.mark.parametrize("view, down, right, rule, off",
+                         [("000027", 1, 0, "TABLE_CLEAR_SHARE", 0.0),
+                          ("000053", 1, 1, "BODY_CUT", 1.01)])
+def test_a_moved_view_holds_one_instance_of_its_container(realdata, monkeypatch, view, down,
+                                                          right, rule, off):
+    """Tracebot views moved by a pixel, each one instance of its container (IoU over 0.7),
+    and a second, on no object, with one rule off.
+
+    027 moved one pixel down: the room's dropouts beyond the table's far edge join the band of
+    holes along it, and their part over the table lies mostly in that band (0.59 of it clear
+    of the TABLE_EDGE_BAND px along the footprint's edge; the container's 0.88-1.0). Measured:
+    IoU 0.76; with no share of the part over the table required to lie clear of the band
+    (TABLE_CLEAR_SHARE), a second instance there.
+
+    053 moved one pixel down and right: the holes on the container's lid are a candidate, its
+    body below is read smoothly (a standing body), and the two fit better as a lid and a body
+    (0.90 and 0.89 against 0.85). That cut runs through the body's readings, one surface
+    across it: the body joins the lid. Measured: IoU 0.75; with a cut through a body taken as
+    two objects (BODY_CUT out of reach), the body is a second instance (0.71) and the lid's
+    holes, parted from it, a false one."""
     from sr3d_cli.segment import training_free
 
-    def found():
-        return _instances_best(realdata.parent / "tracebot-dev", 1, 0, "000027")
-
-    ious = found()
-    assert len(ious) == 1 and ious[0] >= 0.7
-    monkeypatch.setattr(training_free, "TABLE_CLEAR_SHARE", 0.0)
-    ious = found()
-    assert len(ious) == 2 and max(ious) >= 0.7 and min(ious) < 0.2
-
-
-@pytest.mark.slow
-def test_a_containers_lid_and_its_read_body_are_one_instance(realdata, monkeypatch):
-    """Tracebot view 053 moved one pixel down and right: the holes on the container's lid are
-    a candidate, its body below is read smoothly (a standing body), and the two fit better as
-    a lid and a body (0.90 and 0.89 against 0.85). That cut runs through the body's readings,
-    one surface across it: the body joins the lid. Measured: one instance (IoU 0.75); with a
-    cut through a body taken as two objects, the body is a second instance and the lid's
-    holes, parted from it, a false one (0.71)."""
-    from sr3d_cli.segment import training_free
-
-    def found():
-        return _instances_best(realdata.parent / "tracebot-dev", 1, 1, "000053")
-
-    ious = found()
+    tracebot = realdata.parent / "tracebot-dev"
+    ious = _instances_best(tracebot, down, right, view)
     assert len(ious) == 1 and ious[0] >= 0.72
-    monkeypatch.setattr(training_free, "BODY_CUT", 1.01)
-    ious = found()
-    assert len(ious) == 2 and min(ious) < 0.2
+    monkeypatch.setattr(training_free, rule, off)
+    ious = _instances_best(tracebot, down, right, view)
+    assert len(ious) == 2 and max(ious) >= 0.7 and min(ious) < 0.2
 
 
 def test_a_cut_runs_through_one_surface_where_the_readings_go_on_across_it():

@@ -369,9 +369,10 @@ def shows_outline(mask: np.ndarray, departure: np.ndarray,
     border are left out: an instance the border cuts goes on beyond it, and the colour
     compared there is smoothed against the border (a patch of the table's holes at the
     bottom edge of a Tracebot view moved by a pixel: 0.024 with them, 0.0 without)."""
-    inner = cv2.erode(mask.astype(np.uint8), _disk(3)) > 0
-    band = (cv2.dilate(mask.astype(np.uint8), _disk(3)) > 0) & ~inner
-    band[:3], band[-3:], band[:, :3], band[:, -3:] = False, False, False, False
+    width = 3
+    inner = cv2.erode(mask.astype(np.uint8), _disk(width)) > 0
+    band = (cv2.dilate(mask.astype(np.uint8), _disk(width)) > 0) & ~inner
+    band[:width], band[-width:], band[:, :width], band[:, -width:] = False, False, False, False
     if not band.any():
         return False
     departs = np.nan_to_num(departure[band], nan=0.0) > FAINT_COLOUR
