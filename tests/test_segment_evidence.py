@@ -252,6 +252,21 @@ def test_a_bodys_mask_leaves_the_tables_bumps_beside_it(monkeypatch):
     assert instance_ious(loose.ids, ids)[1] < 0.95 and (loose.ids > 0)[bumps].mean() > 0.25
 
 
+def test_a_bodys_low_readings_are_kept_under_its_high_ones_not_beside_them():
+    """A standing body's readings: high ones (seeds) over rows 10-29 of columns 20-29, low
+    ones under them (its foot) and in a ramp beside them (a stereo camera's smoothing across
+    its side), and a second group of low readings with no seed. Only the foot is kept."""
+    readings = np.zeros((50, 60), bool)
+    seeds = np.zeros_like(readings)
+    seeds[10:30, 20:30] = True
+    readings[10:40, 20:30] = True  # the seeds and the foot under them
+    readings[20:40, 30:36] = True  # the ramp beside them
+    readings[10:40, 45:50] = True  # another group, no seed
+    kept = tf.in_seed_columns(readings, seeds)
+    assert kept[10:40, 20:30].all()
+    assert not kept[:, 30:].any() and kept.sum() == 300
+
+
 def test_an_outline_is_read_where_it_is_allowed_to_show():
     """A patch of dropouts on a plain table just below the table's far edge, where the colour
     departs along the whole edge: counted in full, its band shows that edge as an outline;
@@ -605,7 +620,7 @@ def test_the_holes_of_an_opaque_body_in_its_own_colour_are_no_instance():
 @pytest.mark.slow
 def test_measured_on_the_shared_real_frames(realdata):
     """The default segmenter on the 11 shared real frames (no masks given). Measured: best IoU
-    per true object mean 0.755, 16 of 16 objects at IoU >= 0.5 (two at 0.53 and 0.56), no
+    per true object mean 0.770, 16 of 16 objects at IoU >= 0.5 (two at 0.53 and 0.56), no
     false instance (>= 300 px, IoU < 0.2 with every object); with the holes of an opaque body
     kept (``without_opaque_dropouts``: ClearGrasp 123's earphone case) 0.09 per frame; with a
     region's part beyond the table kept while its cuts are judged (ClearGrasp 123's third
@@ -615,7 +630,9 @@ def test_measured_on_the_shared_real_frames(realdata):
     two false instances) 0.692, 14 and 0.27; without the bodies that hide the table joined to
     the instance holding half of them too (``BODY_JOINED`` out of reach: ClearGrasp 123's
     holders 0.84 and 0.85 drop to 0.66 and 0.59) 0.665, 14 and 0.27. The 8 views of the
-    capped container: mean IoU 0.785."""
+    capped container: mean IoU 0.815; with a body's low readings kept beside its high ones'
+    columns too (``in_seed_columns``: the ramp a D4xx's smoothing leaves beside the
+    container's sides joins its body) 0.786, and 0.755 over all."""
     from sr3d_cli.config import IOConfig
     from sr3d_cli.io.formats import discover_scenes
 
@@ -635,15 +652,15 @@ def test_measured_on_the_shared_real_frames(realdata):
             frames += 1
     assert frames == 11 and len(best) == 16
     assert false == 0
-    assert np.mean(best) >= 0.74 and sum(v >= 0.5 for v in best) >= 15  # one at 0.53
-    assert len(container) == 8 and np.mean(container) >= 0.77
+    assert np.mean(best) >= 0.76 and sum(v >= 0.5 for v in best) >= 15  # one at 0.53
+    assert len(container) == 8 and np.mean(container) >= 0.8
 
 
 @pytest.mark.slow
 def test_the_container_views_moved_by_a_pixel(realdata):
     """The 8 Tracebot views moved one pixel right (the first column repeated, K's principal
     point moved with them): the segmenter's 2x2 reduction then keeps the other reading of
-    each block's row. Measured: the container found in 8 of 8 views, mean best IoU 0.74; with
+    each block's row. Measured: the container found in 8 of 8 views, mean best IoU 0.785; with
     a body left out where its join to the instance it overlaps splits, 7 of 8 and 0.66 (view
     000079: the holes on the lid are an instance, the container read smoothly below it is
     another object by the cuts, and was dropped: 0.10); with the regions scored below
@@ -686,7 +703,7 @@ def test_the_cleargrasp_holders_moved_right_by_a_pixel(realdata):
 def test_a_container_moved_down_and_right_keeps_off_the_table_up_to_its_far_edge(realdata):
     """Tracebot view 027 moved one pixel down and right: the container's holes join the band
     of dropouts along the table's far edge, and its instance holds the table between them
-    until it is cut to the hull of its colour outline. Measured: best IoU 0.67; with the
+    until it is cut to the hull of its colour outline. Measured: best IoU 0.64; with the
     table's own edge (where its colour gives way to the room's, TABLE_LINE) counted as an
     outline, the hull reaches the far edge and keeps that table: 0.46."""
     best = _moved_scores(realdata.parent / "tracebot-dev", 1, 1, only="000027")
@@ -700,19 +717,19 @@ def test_a_container_moved_down_and_right_keeps_off_the_table_up_to_its_far_edge
 def test_a_moved_view_holds_one_instance_of_its_container(realdata, monkeypatch, view, down,
                                                           right, rule, off):
     """Tracebot views moved by a pixel, each one instance of its container (IoU over 0.7),
-    and a second, on no object, with one rule off.
+    and a second, on no object, with one rule off (the container's then over 0.65).
 
     027 moved one pixel down: the room's dropouts beyond the table's far edge join the band of
     holes along it, and their part over the table lies mostly in that band (0.59 of it clear
     of the TABLE_EDGE_BAND px along the footprint's edge; the container's 0.88-1.0). Measured:
-    IoU 0.76; with no share of the part over the table required to lie clear of the band
+    IoU 0.78; with no share of the part over the table required to lie clear of the band
     (TABLE_CLEAR_SHARE), a second instance there.
 
     053 moved one pixel down and right: the holes on the container's lid are a candidate, its
     body below is read smoothly (a standing body), and the two fit better as a lid and a body
     (0.90 and 0.89 against 0.85). That cut runs through the body's readings, one surface
-    across it: the body joins the lid. Measured: IoU 0.75; with a cut through a body taken as
-    two objects (BODY_CUT out of reach), the body is a second instance (0.71) and the lid's
+    across it: the body joins the lid. Measured: IoU 0.80; with a cut through a body taken as
+    two objects (BODY_CUT out of reach), the body is a second instance (0.68) and the lid's
     holes, parted from it, a false one."""
     from sr3d_cli.segment import training_free
 
@@ -721,7 +738,7 @@ def test_a_moved_view_holds_one_instance_of_its_container(realdata, monkeypatch,
     assert len(ious) == 1 and ious[0] >= 0.72
     monkeypatch.setattr(training_free, rule, off)
     ious = _instances_best(tracebot, down, right, view)
-    assert len(ious) == 2 and max(ious) >= 0.7 and min(ious) < 0.2
+    assert len(ious) == 2 and max(ious) >= 0.65 and min(ious) < 0.2
 
 
 def test_a_cut_runs_through_one_surface_where_the_readings_go_on_across_it():
