@@ -156,6 +156,29 @@ def test_an_outline_with_a_narrow_opening_is_filled_but_not_the_table_between_ob
     assert not found[80:160, 80:120].any()
 
 
+def test_the_table_between_a_glass_and_the_far_edges_band_is_not_filled():
+    """A glass's evidence reaching up to the band of dropouts along the table's far edge
+    closes in a patch between them. Where the patch reads the table it is table, and the band
+    does not count as closing it in; a patch that does not read the table is filled as
+    before, and so is the table patch where the far edge is not known."""
+    from sr3d_cli.segment.training_free import _enclosed, along_far_edge
+
+    footprint = np.zeros((200, 200), bool)
+    footprint[30:] = True
+    far = along_far_edge(footprint, 8)
+    assert far[22:39].all() and not far[39:].any() and not far[:22].any()
+    region = np.zeros_like(footprint)
+    region[26:35] = True  # the band of dropouts along the far edge
+    region[60:150, 60:120] = True  # the glass
+    region[34:60, 60:66] = region[34:60, 114:120] = True  # its sides up to the band
+    patch = np.zeros_like(footprint)
+    patch[35:60, 66:114] = True
+    on_table = footprint & ~region
+    assert not _enclosed(region, 12, far_edge=far, on_table=on_table)[patch].any()
+    assert _enclosed(region, 12, far_edge=far, on_table=on_table & ~patch)[patch].all()
+    assert _enclosed(region, 12)[patch].all()
+
+
 def test_touching_glasses_are_split_but_a_goblet_is_not():
     from sr3d_cli.segment.training_free import split_touching
 

@@ -702,12 +702,14 @@ def test_the_cleargrasp_holders_moved_right_by_a_pixel(realdata):
 @pytest.mark.slow
 def test_a_container_moved_down_and_right_keeps_off_the_table_up_to_its_far_edge(realdata):
     """Tracebot view 027 moved one pixel down and right: the container's holes join the band
-    of dropouts along the table's far edge, and its instance holds the table between them
-    until it is cut to the hull of its colour outline. Measured: best IoU 0.64; with the
-    table's own edge (where its colour gives way to the room's, TABLE_LINE) counted as an
-    outline, the hull reaches the far edge and keeps that table: 0.46."""
+    of dropouts along the table's far edge. Measured: best IoU 0.78; with that band closing
+    in the table between them (``_enclosed`` without the far edge), 0.64: the instance holds
+    that table until it is cut to the hull of its colour outline; with the table's own edge
+    (where its colour gives way to the room's, TABLE_LINE) counted as an outline, the hull
+    reaches the far edge and keeps some of that table: 0.61 (0.46 with the band closing it
+    in too)."""
     best = _moved_scores(realdata.parent / "tracebot-dev", 1, 1, only="000027")
-    assert len(best) == 1 and best[0] >= 0.6
+    assert len(best) == 1 and best[0] >= 0.7
 
 
 @pytest.mark.slow
