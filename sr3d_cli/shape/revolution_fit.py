@@ -1224,10 +1224,12 @@ def _outline_fit(resting: str, starts: list[LyingStart], outline: _Outline, K, p
                           (across, turn, symmetric)))
     if not tried:
         return None
+    best = max(tried, key=lambda t: t[1])
     others = [t for t in tried if not t[2][2]]
-    best = max(others or tried, key=lambda t: t[1])
-    symmetric = max(tried, key=lambda t: t[1])
-    return symmetric if symmetric[1] > best[1] + SYMMETRY_GAIN else best
+    if not others or not best[2][2]:
+        return best
+    plain = max(others, key=lambda t: t[1])
+    return best if best[1] > plain[1] + SYMMETRY_GAIN else plain
 
 
 def _straight_top_kept(fit: RevolutionFit, model: _Model, outline: _Outline, K, plane,
