@@ -780,6 +780,18 @@ def test_a_pitcher_near_the_tables_far_edge_keeps_to_its_outline(extsim):
 
 
 @pytest.mark.slow
+def test_a_pitchers_rim_seen_through_its_near_wall_stays_in_its_mask(extsim, monkeypatch):
+    """extsim scene 13: a standing pitcher looked down into, its far rim seen through its
+    near wall, where the table's readings are bent 6 mm off its plane. Measured: best IoU
+    0.91; without the hull's gaps, 0.81 (a bite out of its top)."""
+    from sr3d_cli.segment import training_free
+
+    assert _extsim_ious(extsim, "scene_0013")["scene_0013"][1] >= 0.89
+    monkeypatch.setattr(training_free, "with_hull_gaps", lambda found, *args: found)
+    assert _extsim_ious(extsim, "scene_0013")["scene_0013"][1] < 0.84
+
+
+@pytest.mark.slow
 def test_open_vessels_seen_from_above_are_found_round_their_rims(extsim):
     """extsim scene 1's water glass and scene 8's glass bowl, looked down into: the floor
     reads the table, the holes cover an arc of the rim. Measured: best IoU 0.92 and 0.87;
@@ -868,6 +880,42 @@ def test_a_cut_stays_where_no_colour_edge_stands_out():
     moved = tf.cuts_on_colour_edges(cut, rgb, tf.colour_lab(rgb))
     assert all((m.mask == c.mask).all() for m, c in zip(moved, cut))
     assert tf.on_colour_edges([c.mask for c in cut], rgb) is not None
+
+
+def _bitten_disc(gap_height: float, on_table: bool, read: float = 1.0):
+    """A disc instance (radius 30 px) with a 14 px deep bite out of its top, the bite's
+    readings ``gap_height`` metres over the table (on it where ``on_table``), the first
+    ``read`` share of its rows read: (found, Evidence, valid, bite)."""
+    h, w = 100, 100
+    yy, xx = np.mgrid[:h, :w]
+    disc = (xx - 50) ** 2 + (yy - 50) ** 2 <= 30 ** 2
+    bite = disc & (yy < 34) & (np.abs(xx - 50) < 16)
+    valid = np.ones((h, w), bool)
+    rows = np.flatnonzero(bite.any(axis=1))
+    valid[rows[int(read * len(rows)):]] = False
+    valid[~bite] = True
+    height = np.where(bite & valid, gap_height, 0.0)
+    table = ~disc | (bite & on_table)
+    ev = tf.Evidence(glass=disc & ~bite, opaque=np.zeros((h, w), bool),
+                     footprint=np.ones((h, w), bool), on_table=table & valid,
+                     above=np.zeros((h, w), bool), height=height)
+    return [tf.Candidate(disc & ~bite, 1.0)], ev, valid, bite
+
+
+def test_a_hull_gap_read_a_few_millimetres_off_the_table_joins_its_instance():
+    """The gap a glass's bent readings leave in its mask (6 mm over the table, off it) is
+    added; one reading an object standing beside it (40 mm over), the table itself, or
+    mostly nothing, is not."""
+    for height, on_table, read, joins in [(0.006, False, 1.0, True), (0.04, False, 1.0, False),
+                                          (0.0, True, 1.0, False), (0.006, False, 0.3, False)]:
+        found, ev, valid, bite = _bitten_disc(height, on_table, read)
+        out = tf.with_hull_gaps(found, ev, valid, np.zeros_like(valid))
+        assert (out[0].mask & bite).any() == joins
+        assert (out[0].mask >= found[0].mask).all()
+    found, ev, valid, bite = _bitten_disc(0.006, False)
+    beside = np.zeros_like(valid)
+    beside[:34] = True  # the band around an opaque object covers the bite
+    assert not (tf.with_hull_gaps(found, ev, valid, beside)[0].mask & bite).any()
 
 
 def test_touching_groups_link_what_touches_and_leave_the_rest():
