@@ -1,5 +1,6 @@
 """Shape models beyond a plain surface of revolution, on small rendered scenes with known truth:
-a handle split off a mug's outline and modelled as a slab, a dome not taken for a bowl."""
+a handle split off a mug's outline (standing or lying) and modelled as a slab, a dome not
+taken for a bowl."""
 
 from __future__ import annotations
 
@@ -80,6 +81,56 @@ def test_a_handle_is_split_off_and_the_body_fitted_without_it():
     both = (drawn > 0) & truth
     assert both.sum() > 0.8 * truth.sum()
     assert np.median(np.abs(drawn[both] - handle_depth[both])) < TUBE
+
+
+def _lying_mug_frame(turn: float, side: float):
+    """The mug of :func:`_mug_frame` lying on the table, its axis ``turn`` deg from the image's
+    x axis within the table, its handle standing out sideways along the table (``side`` +1 or
+    -1: away from the camera or towards it). Returns (mask (H, W) bool, K, plane, depth (H, W)
+    m, the handle's seen pixels (H, W) bool)."""
+    plane = table()
+    up = plane.normal
+    x0 = np.array([1.0, 0, 0]) - up[0] * up
+    x0 /= np.linalg.norm(x0)
+    t = np.radians(turn)
+    axis = np.cos(t) * x0 + np.sin(t) * np.cross(up, x0)
+    out_dir = side * np.cross(up, axis)
+    R = np.stack([out_dir, np.cross(axis, out_dir), axis], 1)
+    base = table_point(plane, 0.0, 0.0) + BODY_R * up - 0.5 * BODY_H * axis
+    body = revolve(np.array([[0, 0], [BODY_R, 0], [BODY_R, BODY_H], [0, BODY_H]]) / BODY_H)
+    parts = []
+    for extent, centre in (((REACH, TUBE, TUBE), (BODY_R + REACH / 2, 0, 0.07)),
+                           ((REACH, TUBE, TUBE), (BODY_R + REACH / 2, 0, 0.02)),
+                           ((TUBE, TUBE, 0.05 + TUBE), (BODY_R + REACH - TUBE / 2, 0, 0.045))):
+        box = trimesh.creation.box(extent)
+        box.apply_translation(centre)
+        parts.append(box)
+    handle = trimesh.util.concatenate(parts)
+    renderer = make_renderer("numpy")
+    meshes = [RenderMesh(body.vertices @ (BODY_H * R).T + base, np.asarray(body.faces), 1),
+              RenderMesh(handle.vertices @ R.T + base, np.asarray(handle.faces), 1)]
+    out = renderer.render(meshes, Camera(K_TABLE, 640, 480))
+    alone = renderer.render(meshes[1:], Camera(K_TABLE, 640, 480))
+    return out.ids == 1, K_TABLE, plane, out.depth.astype(np.float64), \
+        (alone.depth > 0) & (out.depth == alone.depth)
+
+
+@pytest.mark.parametrize("turn, side", [(0.0, 1.0), (0.0, -1.0), (30.0, 1.0), (30.0, -1.0)])
+def test_a_lying_mugs_handle_is_split_off_beside_its_axis(turn, side):
+    """A mug lying across the image, its handle beside it: the upright line through the body
+    crosses the handle, the body's own long axis does not. Measured: 0.84-0.97 of the handle's
+    pixels split off, none of the body's; the lying body fitted without them 34.6-34.7 mm in
+    radius (35 true) and 88.7-90.1 mm long (90), IoU 0.98-0.99; with them 38.9-45.2 mm and
+    60.4-97.9 mm, IoU 0.82-0.89 (the handle was not split before the long axis was read)."""
+    mask, K, plane, depth, truth = _lying_mug_frame(turn, side)
+    body, handle = split_handle(mask, K, plane)
+    assert (handle & truth).sum() > 0.8 * truth.sum() and not (handle & ~truth).any()
+    fit = fit_revolution(body, K, plane, depth=depth)
+    whole = fit_revolution(mask, K, plane, depth=depth)
+    assert fit.resting == "lying" and fit.iou > 0.97 and whole.iou < 0.9
+    assert np.median(fit.profile[1:-1, 0]) * fit.height == pytest.approx(BODY_R, rel=0.03)
+    assert fit.height == pytest.approx(BODY_H, rel=0.03)
+    assert np.median(whole.profile[1:-1, 0]) * whole.height > 1.1 * BODY_R
 
 
 def test_a_goblet_stem_and_a_bottle_neck_are_no_handles():

@@ -7,7 +7,9 @@ its body 1 cm too wide and put its front surface 2 cm too near). The handle is f
 image: an opening of the mask with a disc a quarter of the body's width removes what is thinner
 than that (a handle's tube, not a bottle's neck), and a removed part is a handle when it is
 large, lies outside the convex hull of what the opening kept and to one side of the body's
-upright centre line (a goblet's stem and a flask's neck straddle it).
+upright centre line (a goblet's stem and a flask's neck straddle it) or of the kept body's own
+long axis (a lying body's axis runs across the image: a lying pitcher's handle stands out
+beside it, and the upright line through the body may cross the handle).
 
 Its depth is modelled by a slab over the handle's own pixels, in the plane through the body's
 axis that faces the camera (a handle seen beside its body stands out sideways, at about the
@@ -63,29 +65,38 @@ def _split_in(mask: np.ndarray, K: np.ndarray, plane: Plane) -> tuple[np.ndarray
     if not kept.any():
         return mask, none
     ys, xs = np.nonzero(kept)
+    body = np.column_stack([xs, ys]).astype(np.float64)
     hull = convex_hull(kept)
-    centre = np.array([xs.mean(), ys.mean()])
-    down = plane.down_at(centre, K)
-    across = np.array([-down[1], down[0]])
-    half_width = 0.5 * kept.sum() / max(np.ptp(np.column_stack([xs, ys]) @ down), 1.0)
+    centre = body.mean(axis=0)
+    # the upright line through the body, then the body's own long axis (the principal axis of
+    # its pixels)
+    long_axis = np.linalg.eigh(np.cov((body - centre).T))[1][:, 1]
+    lines = [plane.down_at(centre, K), long_axis]
     count, labels = cv2.connectedComponents((mask & ~kept).astype(np.uint8), connectivity=8)
     area = int(mask.sum())
     handle = none.copy()
     for k in range(1, count):
         part = labels == k
-        size = int(part.sum())
-        if size < MIN_SHARE * area:
+        if part.sum() < MIN_SHARE * area:
             continue
         py, px = np.nonzero(part)
-        side = (np.column_stack([px, py]) - centre) @ across
-        outside = 1.0 - hull[py, px].mean()
-        one_side = max((side > 0).mean(), (side < 0).mean())
-        if outside >= OUTSIDE_SHARE and one_side >= ONE_SIDE and \
-                np.abs(side).mean() > half_width:
+        if 1.0 - hull[py, px].mean() >= OUTSIDE_SHARE and \
+                any(_beside(np.column_stack([px, py]), body, centre, line) for line in lines):
             handle |= part
     if handle.sum() > MAX_SHARE * area:
         return mask, none
     return mask & ~handle, handle
+
+
+def _beside(part: np.ndarray, body: np.ndarray, centre: np.ndarray, along: np.ndarray
+            ) -> bool:
+    """Whether the pixels ``part`` (n, 2) (x, y) lie to one side of the line through ``centre``
+    (2,) along the unit ``along`` (2,): :data:`ONE_SIDE` of them on one side, on average
+    farther from it than half the width across it of the ``body`` pixels (m, 2)."""
+    half_width = 0.5 * len(body) / max(np.ptp(body @ along), 1.0)
+    side = (part - centre) @ np.array([-along[1], along[0]])
+    return max((side > 0).mean(), (side < 0).mean()) >= ONE_SIDE and \
+        np.abs(side).mean() > half_width
 
 
 def handle_slab(handle: np.ndarray, T_cam_obj: np.ndarray, scale: float, K: np.ndarray
