@@ -24,6 +24,20 @@ TUBE = 0.008  # metres: the handle's square section
 REACH = 0.03  # metres the handle stands out from the wall
 
 
+def _mug() -> tuple[trimesh.Trimesh, trimesh.Trimesh]:
+    """The mug in its object frame: the cylinder of unit height (scaled by ``BODY_H``) and,
+    in metres, a C-shaped handle of three boxes standing out along +x."""
+    body = revolve(np.array([[0, 0], [BODY_R, 0], [BODY_R, BODY_H], [0, BODY_H]]) / BODY_H)
+    parts = []
+    for extent, centre in (((REACH, TUBE, TUBE), (BODY_R + REACH / 2, 0, 0.07)),
+                           ((REACH, TUBE, TUBE), (BODY_R + REACH / 2, 0, 0.02)),
+                           ((TUBE, TUBE, 0.05 + TUBE), (BODY_R + REACH - TUBE / 2, 0, 0.045))):
+        box = trimesh.creation.box(extent)
+        box.apply_translation(centre)
+        parts.append(box)
+    return body, trimesh.util.concatenate(parts)
+
+
 def _mug_frame():
     """A standing cylinder with a C-shaped handle of three boxes on its right (image +x),
     seen from the tests' table camera. Returns (ids (H, W), K, plane, depth (H, W) m, the
@@ -33,15 +47,7 @@ def _mug_frame():
     x_dir = np.array([1.0, 0, 0])
     R = np.stack([x_dir, np.cross(up, x_dir), up], 1)
     base = table_point(plane, 0.0, 0.0)
-    body = revolve(np.array([[0, 0], [BODY_R, 0], [BODY_R, BODY_H], [0, BODY_H]]) / BODY_H)
-    parts = []
-    for extent, centre in (((REACH, TUBE, TUBE), (BODY_R + REACH / 2, 0, 0.07)),
-                           ((REACH, TUBE, TUBE), (BODY_R + REACH / 2, 0, 0.02)),
-                           ((TUBE, TUBE, 0.05 + TUBE), (BODY_R + REACH - TUBE / 2, 0, 0.045))):
-        box = trimesh.creation.box(extent)
-        box.apply_translation(centre)
-        parts.append(box)
-    handle = trimesh.util.concatenate(parts)
+    body, handle = _mug()
     cam = Camera(K_TABLE, 640, 480)
     renderer = make_renderer("numpy")
     meshes = [RenderMesh(body.vertices @ (BODY_H * R).T + base, np.asarray(body.faces), 1),
@@ -97,15 +103,7 @@ def _lying_mug_frame(turn: float, side: float):
     out_dir = side * np.cross(up, axis)
     R = np.stack([out_dir, np.cross(axis, out_dir), axis], 1)
     base = table_point(plane, 0.0, 0.0) + BODY_R * up - 0.5 * BODY_H * axis
-    body = revolve(np.array([[0, 0], [BODY_R, 0], [BODY_R, BODY_H], [0, BODY_H]]) / BODY_H)
-    parts = []
-    for extent, centre in (((REACH, TUBE, TUBE), (BODY_R + REACH / 2, 0, 0.07)),
-                           ((REACH, TUBE, TUBE), (BODY_R + REACH / 2, 0, 0.02)),
-                           ((TUBE, TUBE, 0.05 + TUBE), (BODY_R + REACH - TUBE / 2, 0, 0.045))):
-        box = trimesh.creation.box(extent)
-        box.apply_translation(centre)
-        parts.append(box)
-    handle = trimesh.util.concatenate(parts)
+    body, handle = _mug()
     renderer = make_renderer("numpy")
     meshes = [RenderMesh(body.vertices @ (BODY_H * R).T + base, np.asarray(body.faces), 1),
               RenderMesh(handle.vertices @ R.T + base, np.asarray(handle.faces), 1)]

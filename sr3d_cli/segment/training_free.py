@@ -82,7 +82,7 @@ BORDER_REACH = 0.1  # share of the image width along its sides where holes may b
 # 0.5 m for a D415 at 1280 px); see evidence_maps
 ENCLOSED_SHARE = 0.8  # share of a gap's surroundings the region must hold to fill it (_enclosed)
 TABLE_GAP = 0.5  # share of a gap's pixels reading the table for it to be table (_enclosed)
-HULL_GAP_LEAST = 20  # px: smallest gap in an instance's convex hull that is judged (with_hull_gaps)
+HULL_GAP_LEAST = 20  # px: smallest gap in an instance's convex hull judged (with_hull_gaps)
 HULL_GAP_READ = 0.5  # least share of such a gap's pixels with a reading
 EDGE_REACH, EDGE_SHARE, EDGE_THIN = 8, 0.8, 4.0  # an opaque object's edge band (opaque_edges)
 SHADOW_STEP = 0.005  # m: a reading this much nearer than the one across a run of holes casts a
@@ -1364,6 +1364,32 @@ def on_colour_edges(parts: list[np.ndarray], rgb: np.ndarray, reach: int = CUT_R
     return out
 
 
+def cuts_on_colour_edges(found: list[Candidate], rgb: np.ndarray, lab: np.ndarray, *,
+                         reach: int = CUT_REACH, gain: float = CUT_CONTRAST_GAIN
+                         ) -> list[Candidate]:
+    """``found`` with the lines between touching instances moved onto a colour edge
+    (:func:`on_colour_edges`) where that raises the colour contrast along them
+    (:func:`cut_contrast`) by ``gain`` of itself. A cut chosen by the shapes the parts draw
+    runs where their silhouettes meet best, not where the glasses' edges are: where one glass
+    stands in front of another, the nearer one's rim and outline show as a colour edge a few
+    pixels away (extsim 0: a wine glass in front of a bowl, cut through its bowl). Where no
+    edge stands out (a real frame's faint glass), the watershed wanders and is not kept.
+    rgb ``(H, W, 3) uint8``; lab its :func:`colour_lab`."""
+    groups = touching_groups([c.mask for c in found])
+    if not groups:
+        return found
+    gradient = colour_gradient(lab)
+    out = list(found)
+    for group in groups:
+        parts = [found[i].mask for i in group]
+        moved = on_colour_edges(parts, rgb, reach)
+        if moved is not None and \
+                cut_contrast(moved, gradient) > (1 + gain) * cut_contrast(parts, gradient):
+            for i, mask in zip(group, moved):
+                out[i] = Candidate(mask, found[i].score)
+    return out
+
+
 def with_hull_gaps(found: list[Candidate], ev: "Evidence", valid: np.ndarray,
                    beside_opaque: np.ndarray) -> list[Candidate]:
     """``found`` with the gaps in each instance's convex hull that a glass seen through
@@ -1396,32 +1422,6 @@ def with_hull_gaps(found: list[Candidate], ev: "Evidence", valid: np.ndarray,
                 added |= gap
         free &= ~added
         out.append(Candidate(c.mask | added, c.score))
-    return out
-
-
-def cuts_on_colour_edges(found: list[Candidate], rgb: np.ndarray, lab: np.ndarray, *,
-                         reach: int = CUT_REACH, gain: float = CUT_CONTRAST_GAIN
-                         ) -> list[Candidate]:
-    """``found`` with the lines between touching instances moved onto a colour edge
-    (:func:`on_colour_edges`) where that raises the colour contrast along them
-    (:func:`cut_contrast`) by ``gain`` of itself. A cut chosen by the shapes the parts draw
-    runs where their silhouettes meet best, not where the glasses' edges are: where one glass
-    stands in front of another, the nearer one's rim and outline show as a colour edge a few
-    pixels away (extsim 0: a wine glass in front of a bowl, cut through its bowl). Where no
-    edge stands out (a real frame's faint glass), the watershed wanders and is not kept.
-    rgb ``(H, W, 3) uint8``; lab its :func:`colour_lab`."""
-    groups = touching_groups([c.mask for c in found])
-    if not groups:
-        return found
-    gradient = colour_gradient(lab)
-    out = list(found)
-    for group in groups:
-        parts = [found[i].mask for i in group]
-        moved = on_colour_edges(parts, rgb, reach)
-        if moved is not None and \
-                cut_contrast(moved, gradient) > (1 + gain) * cut_contrast(parts, gradient):
-            for i, mask in zip(group, moved):
-                out[i] = Candidate(mask, found[i].score)
     return out
 
 
