@@ -17,6 +17,10 @@ it hides: the sensor's holes within :data:`HOLE_REACH` px of a mask and readings
 beyond it) seen through the object, farther than the mesh's surface. A mask that misses part of
 its object then still gets that part's depth; readings in front of the mesh (an occluder) and
 readings of the room above the table's plane (a wall behind a misplaced mesh) stay the sensor's.
+Within the convex hull of an object's mask, any reading farther than the mesh is seen through
+it: where a glass stands in front of an opaque object, the segmenter leaves the part that
+shows the object behind out of the mask (a dent in the outline), and that object's readings
+lie above the table.
 Holes within that reach the meshes do not cover (a glass's dropouts the mask and mesh miss) are
 inpainted from the depth around them (:func:`fill_holes_near`).
 """
@@ -27,7 +31,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from sr3d_cli.geometry.camera import Camera, mask_window, window_K
+from sr3d_cli.geometry.camera import Camera, convex_hull, mask_window, window_K
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points
 from sr3d_cli.render import RenderMesh, Renderer
@@ -46,15 +50,21 @@ def placed_render_meshes(placed: list[tuple[int, object, np.ndarray, float]]) ->
 
 
 def hidden_beyond(raw_m: np.ndarray, outside: np.ndarray, render_depth: np.ndarray,
-                  near: np.ndarray, plane: Plane, K: np.ndarray) -> np.ndarray:
+                  near: np.ndarray, plane: Plane, K: np.ndarray,
+                  hulls: np.ndarray | None = None) -> np.ndarray:
     """(H, W) bool: pixels ``outside (H, W) bool`` every mask where the placed meshes hide the
-    sensor's reading (see the module docstring): its holes ``near (H, W) bool`` a mask and
-    readings of the table seen through them. raw_m, render_depth : (H, W) metres (0 = none)."""
+    sensor's reading (see the module docstring): its holes ``near (H, W) bool`` a mask,
+    readings of the table seen through them and, within ``hulls (H, W) bool`` (the convex
+    hulls of the masks), any reading behind them. raw_m, render_depth : (H, W) metres
+    (0 = none)."""
     drawn = (render_depth > 0) & outside
     if not drawn.any():
         return drawn
     table = plane.depth_image(raw_m.shape, K)
-    through = (raw_m > render_depth + BEHIND) & (table > 0) & (raw_m >= table - ON_TABLE)
+    behind = raw_m > render_depth + BEHIND
+    through = behind & (table > 0) & (raw_m >= table - ON_TABLE)
+    if hulls is not None:
+        through |= behind & hulls
     return drawn & (((raw_m <= 0) & near) | through)
 
 
@@ -96,8 +106,11 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
             window, drawn = out[box], render_depth[box]
             off = (~inside[box]).astype(np.uint8)
             by_mask = cv2.distanceTransform(off, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= HOLE_REACH
+            hulls = np.zeros(drawn.shape, bool)
+            for k in placed_ids:
+                hulls |= convex_hull(ids[box] == k)
             hidden = hidden_beyond(raw_m[box], ids[box] == 0, drawn, by_mask, plane,
-                                   window_K(K, box[1].start, box[0].start))
+                                   window_K(K, box[1].start, box[0].start), hulls)
             window[hidden] = drawn[hidden]
             fill_holes_near(window, by_mask)
     miss = inside & ~hit

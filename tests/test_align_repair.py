@@ -14,7 +14,7 @@ from click.testing import CliRunner
 from sr3d_cli.align import AlignError, Aligner, _Subject, _Window
 from sr3d_cli.cli import cli
 from sr3d_cli.config import AlignConfig
-from sr3d_cli.geometry.camera import Camera
+from sr3d_cli.geometry.camera import Camera, convex_hull
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import revolve
 from sr3d_cli.geometry.transforms import make_T, rotation_about, unit
@@ -345,6 +345,35 @@ def test_repair_beyond_the_mask_fills_what_the_mesh_hides_and_keeps_what_is_in_f
     assert np.all(filled[holes & (reach > 15)] == 0)  # far from every mask a hole stays one
     assert np.array_equal(filled[occluder], raw[occluder])
     assert np.array_equal(filled[~mask], raw[~mask])  # off the object: the sensor's depth
+
+
+def test_repair_within_the_mask_hull_takes_the_mesh_over_an_object_seen_through_it():
+    plane, T, scale, mask, raw, gt = _scene(12)
+    table = make_renderer("numpy").render([_table_mesh(plane)], CAMERA).depth
+    ys, xs = np.nonzero(mask)
+    rows = np.arange(mask.shape[0])[:, None]
+    cols = np.arange(mask.shape[1])[None, :]
+    mid = (ys.min() + ys.max()) // 2
+    # a box behind the glass's right side shows through it: the segmenter cut that part out
+    # of the mask, a dent between rows of the mask on either side
+    right = np.array([xs[ys == y].max() if (ys == y).any() else -1 for y in range(mask.shape[0])])
+    dent = mask & (np.abs(rows - mid) < 8) & (cols > right[:, None] - 8)
+    top = mask & (rows < ys.min() + (ys.max() - ys.min()) // 4)  # the mask misses the top
+    box = gt + 0.03  # the box's face, 3 cm behind the glass and well above the table
+    raw = raw.copy()
+    raw[dent | top] = box[dent | top]
+    assert np.all(raw[dent | top] < table[dent | top] - 0.01)
+    render = make_renderer("numpy").render(
+        [RenderMesh(BOTTLE.vertices @ (scale * T[:3, :3]).T + T[:3, 3],
+                    np.asarray(BOTTLE.faces), 1)], CAMERA)
+    ids = (mask & ~dent & ~top).astype(int)
+    filled = compose_depth(raw, ids, render.depth, [1], plane=plane, K=K, beyond_mask=True)
+    hull = convex_hull(ids > 0)
+    assert dent.sum() > 40 and top.sum() > 300
+    # inside the hull, the glass's depth (the hull's chord leaves out the outline's edge)
+    assert np.abs(filled - gt)[dent & hull].max() < 1e-6 and (dent & hull).sum() > 0.8 * dent.sum()
+    # above the hull the box's readings stay: a mesh placed wrong must not cover the room
+    assert (top & ~hull).sum() > 300 and np.array_equal(filled[top & ~hull], raw[top & ~hull])
 
 
 def test_repair_inpaints_the_holes_near_a_mask_that_the_mesh_does_not_cover():
