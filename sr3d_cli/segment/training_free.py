@@ -738,7 +738,11 @@ def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
     the sensor failed on, unless the join is no longer ``one_object`` (a callable on an
     ``(H, W) bool`` mask and the body: :func:`splits` finds no cut but through the body's
     own surface, as where a container's lid's holes join its read body, Tracebot views 053
-    and 079 moved by a pixel); then the body's part beyond that
+    and 079 moved by a pixel). A joined body that shows the table and that ``parted`` cuts
+    into standing parts is objects side by side whose holes the candidate joined across their
+    tops (the shared Tracebot views copied beside themselves 40 px apart: 053, 066 and 092):
+    the join goes to the parts, each pixel to the nearest (:func:`nearest_part`). Where the
+    join is not one object, the body's part beyond that
     candidate is another object touching it, new like a body overlapping none where it
     passes ``tests`` itself (:class:`BodyTests`) and shows the table (a container read
     smoothly beside the holes on its lid; not a notebook that joined a glass's body, flat and
@@ -763,13 +767,28 @@ def with_bodies(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
             free = body & ~np.any(others, axis=0) if others else body
             joined = out[j].mask | free
             if one_object(joined, body):
-                out[j] = Candidate(joined, out[j].score)
+                pieces = nearest_part(joined, parted(body) if sees_table else [body])
+                out += [Candidate(piece, out[j].score) for piece in pieces[1:]]
+                out[j] = Candidate(pieces[0], out[j].score)
             elif tests is not None:
                 rest = free & ~out[j].mask
                 if tests(rest):
                     out += [Candidate(part, float(evidence[part].mean()))
                             for part in parted(rest)]
     return out
+
+
+def nearest_part(mask: np.ndarray, parts: list[np.ndarray]) -> list[np.ndarray]:
+    """``mask`` ``(H, W) bool`` divided among ``parts`` (``(H, W) bool`` each): each pixel
+    goes to the part nearest to it (:func:`_nearest_seed`; where parts overlap, the later
+    one). One part or none: ``[mask]``."""
+    if len(parts) < 2:
+        return [mask]
+    seeds = np.zeros(mask.shape, np.int32)
+    for k, part in enumerate(parts):
+        seeds[part] = k + 1
+    nearest = _nearest_seed(seeds)
+    return [mask & (nearest == k + 1) for k in range(len(parts))]
 
 
 def without_opaque_dropouts(found: list[Candidate], bodies: list[tuple[np.ndarray, bool]],
