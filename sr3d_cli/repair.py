@@ -3,8 +3,9 @@
 Inside an object's mask the rendered depth replaces the sensor's (the renderer's z-buffer keeps
 the nearest surface where objects overlap); elsewhere the sensor's depth is kept. Mask pixels the
 placed mesh does not cover take the nearest rendered depth within a few pixels
-(``outside_render: nearest``, the default), keep the sensor's reading (``keep``) or take the
-table's depth (``plane``). Objects that could not be placed are left untouched.
+(``outside_render: nearest``, the default; farther from the mesh, a part the model lacks such as
+a handle, they take their object's nearest rendered depth where the sensor reads nothing or
+reads beyond it), keep the sensor's reading (``keep``) or take the table's depth (``plane``). Objects that could not be placed are left untouched.
 
 A sensor reading inside a mask that lies more than :data:`NEARER` in front of the placed mesh
 stays (``keep_nearer``, the default): a depth camera reads the nearest surface on its ray, and
@@ -118,13 +119,38 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
         return out
     if outside_render == "nearest":
         # a mask a little larger than the placed mesh: the nearest rendered surface, within
-        # ``max_gap`` pixels; further away the sensor's reading stays
+        # ``max_gap`` pixels; further away, see :func:`beyond_the_model`
         dist, (iy, ix) = ndimage.distance_transform_edt(~(render_depth > 0), return_indices=True)
         near = miss & (dist <= max_gap)
         out[near] = render_depth[iy[near], ix[near]]
+        beyond_the_model(out, raw_m, ids, render_depth, miss & ~near, placed_ids)
     elif outside_render == "plane" and plane is not None and K is not None:
         out[miss] = plane.depth_image(raw_m.shape, K)[miss]
     return out
+
+
+def beyond_the_model(out: np.ndarray, raw_m: np.ndarray, ids: np.ndarray,
+                     render_depth: np.ndarray, far: np.ndarray, placed_ids: list[int]) -> None:
+    """Depth for the mask pixels ``far (H, W) bool`` that the placed mesh leaves uncovered by
+    more than a few pixels: a part of the object its model lacks (a handle, a spout, a lid's
+    rim) or a wider mask. Each takes, in ``out (H, W) float32`` metres, the rendered depth of
+    its own object's nearest covered pixel where the sensor read nothing there or read
+    :data:`BEHIND` beyond that depth (the table seen through the part); a reading in front of
+    it is the part's own surface or an occluder and stays. raw_m, render_depth : (H, W)
+    metres (0 = none); ids : (H, W) instance ids."""
+    for k in placed_ids:
+        mine = ids == k
+        if not (far & mine).any():
+            continue
+        box = mask_window(mine, 0)
+        own = mine[box] & (render_depth[box] > 0)
+        if not own.any():
+            continue
+        _, (iy, ix) = ndimage.distance_transform_edt(~own, return_indices=True)
+        nearest = render_depth[box][iy, ix]
+        raw = raw_m[box]
+        fix = far[box] & mine[box] & ((raw <= 0) | (raw > nearest + BEHIND))
+        out[box][fix] = nearest[fix]
 
 
 def repair_frame(raw_m: np.ndarray, ids: np.ndarray, camera: Camera, renderer: Renderer,

@@ -419,3 +419,39 @@ def test_repair_keeps_the_readings_in_front_of_a_mesh_placed_too_far():
     assert np.array_equal(kept[beyond], drawn[beyond])  # through the glass: the mesh
     # near its base the mesh placed too far sinks under the table, whose readings stay
     assert np.abs(kept - gt)[through].mean() <= np.abs(drawn - gt)[through].mean()
+
+
+def test_repair_gives_a_part_the_model_lacks_its_objects_nearest_depth():
+    """A handle in the mask, 8-30 px beside the placed bottle (beyond the few pixels the
+    nearest rendered depth reaches): where the sensor reads nothing there or reads the table
+    behind it, it takes the depth of the bottle's nearest rendered pixel; a reading in front
+    of that (the handle's own surface) stays, and so does everything off the mask."""
+    plane, T, scale, mask, raw, gt = _scene(12)
+    render = make_renderer("numpy").render(
+        [RenderMesh(BOTTLE.vertices @ (scale * T[:3, :3]).T + T[:3, 3],
+                    np.asarray(BOTTLE.faces), 1)], CAMERA)
+    drawn = render.depth > 0
+    ys, xs = np.nonzero(drawn)
+    mid = (ys.min() + ys.max()) // 2
+    right = xs[ys == mid].max()
+    cols = np.arange(mask.shape[1])[None, :]
+    handle = np.zeros_like(mask)
+    handle[mid - 12:mid + 12] = (cols > right + 8) & (cols <= right + 30)
+    table = make_renderer("numpy").render([_table_mesh(plane)], CAMERA).depth
+    _, (iy, ix) = ndimage.distance_transform_edt(~drawn, return_indices=True)
+    nearest = render.depth[iy, ix]
+    raw = raw.copy()
+    third = np.arange(mask.shape[0])[:, None] - (mid - 12)
+    holes, through, front = (handle & (third // 8 == k) for k in range(3))
+    raw[holes] = 0
+    raw[through] = table[through]
+    raw[front] = nearest[front] - 0.02
+    assert np.all(table[through] > nearest[through] + 0.02)
+    ids = (drawn | handle).astype(int)
+    out = compose_depth(raw, ids, render.depth, [1])
+    assert holes.sum() == through.sum() == front.sum() == 8 * 22
+    assert np.abs(out - nearest)[holes | through].max() < 1e-6
+    assert np.array_equal(out[front], raw[front].astype(np.float32))
+    assert np.array_equal(out[ids == 0], raw[ids == 0].astype(np.float32))
+    kept = compose_depth(raw, ids, render.depth, [1], outside_render="keep")
+    assert np.array_equal(kept[handle], raw[handle].astype(np.float32))
