@@ -5,7 +5,7 @@ the nearest surface where objects overlap); elsewhere the sensor's depth is kept
 placed mesh does not cover take the nearest rendered depth within a few pixels
 (``outside_render: nearest``, the default; farther from the mesh, a part the model lacks such as
 a handle, they take their object's nearest rendered depth where the sensor reads nothing or
-reads beyond it), keep the sensor's reading (``keep``) or take the table's depth (``plane``). Objects that could not be placed are left untouched.
+reads the table behind it), keep the sensor's reading (``keep``) or take the table's depth (``plane``). Objects that could not be placed are left untouched.
 
 A sensor reading inside a mask that lies more than :data:`NEARER` in front of the placed mesh
 stays (``keep_nearer``, the default): a depth camera reads the nearest surface on its ray, and
@@ -94,6 +94,8 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
     (0 = empty); placed_ids : the objects that were placed; beyond_mask : also replace the
     readings the meshes hide just outside the masks (needs ``plane`` and ``K``); keep_nearer :
     keep the readings inside the masks that lie over :data:`NEARER` in front of the meshes.
+    Mask pixels over ``max_gap`` px from the meshes: :func:`beyond_the_model` (the table's
+    readings seen through a part there are known as such only given ``plane`` and ``K``).
     """
     out = raw_m.astype(np.float32).copy()
     inside = np.isin(ids, placed_ids)
@@ -123,21 +125,27 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
         dist, (iy, ix) = ndimage.distance_transform_edt(~(render_depth > 0), return_indices=True)
         near = miss & (dist <= max_gap)
         out[near] = render_depth[iy[near], ix[near]]
-        beyond_the_model(out, raw_m, ids, render_depth, miss & ~near, placed_ids)
+        far = miss & ~near
+        if far.any():
+            table = None if plane is None or K is None else plane.depth_image(raw_m.shape, K)
+            beyond_the_model(out, raw_m, ids, render_depth, far, placed_ids, table)
     elif outside_render == "plane" and plane is not None and K is not None:
         out[miss] = plane.depth_image(raw_m.shape, K)[miss]
     return out
 
 
 def beyond_the_model(out: np.ndarray, raw_m: np.ndarray, ids: np.ndarray,
-                     render_depth: np.ndarray, far: np.ndarray, placed_ids: list[int]) -> None:
+                     render_depth: np.ndarray, far: np.ndarray, placed_ids: list[int],
+                     table: np.ndarray | None = None) -> None:
     """Depth for the mask pixels ``far (H, W) bool`` that the placed mesh leaves uncovered by
     more than a few pixels: a part of the object its model lacks (a handle, a spout, a lid's
     rim) or a wider mask. Each takes, in ``out (H, W) float32`` metres, the rendered depth of
-    its own object's nearest covered pixel where the sensor read nothing there or read
-    :data:`BEHIND` beyond that depth (the table seen through the part); a reading in front of
-    it is the part's own surface or an occluder and stays. raw_m, render_depth : (H, W)
-    metres (0 = none); ids : (H, W) instance ids."""
+    its own object's nearest covered pixel where the sensor read nothing there or, given the
+    table's depth ``table (H, W)`` metres (0 where a ray misses it), read the table (or
+    beyond it) :data:`BEHIND` beyond that depth: seen through the part. Other readings stay:
+    one in front is the part's own surface or an occluder, one above the table behind it
+    (a wall, a box) is what a mask reaching past its object holds. raw_m, render_depth :
+    (H, W) metres (0 = none); ids : (H, W) instance ids."""
     for k in placed_ids:
         mine = ids == k
         if not (far & mine).any():
@@ -149,7 +157,11 @@ def beyond_the_model(out: np.ndarray, raw_m: np.ndarray, ids: np.ndarray,
         _, (iy, ix) = ndimage.distance_transform_edt(~own, return_indices=True)
         nearest = render_depth[box][iy, ix]
         raw = raw_m[box]
-        fix = far[box] & mine[box] & ((raw <= 0) | (raw > nearest + BEHIND))
+        lost = raw <= 0
+        if table is not None:
+            behind = table[box]
+            lost |= (raw > nearest + BEHIND) & (behind > 0) & (raw >= behind - ON_TABLE)
+        fix = far[box] & mine[box] & lost
         out[box][fix] = nearest[fix]
 
 

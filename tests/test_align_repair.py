@@ -424,8 +424,10 @@ def test_repair_keeps_the_readings_in_front_of_a_mesh_placed_too_far():
 def test_repair_gives_a_part_the_model_lacks_its_objects_nearest_depth():
     """A handle in the mask, 8-30 px beside the placed bottle (beyond the few pixels the
     nearest rendered depth reaches): where the sensor reads nothing there or reads the table
-    behind it, it takes the depth of the bottle's nearest rendered pixel; a reading in front
-    of that (the handle's own surface) stays, and so does everything off the mask."""
+    behind it, it takes the depth of the bottle's nearest rendered pixel. A reading in front
+    of that (the handle's own surface) stays, so does one behind it but above the table (a
+    box behind: a mask reaching past its object), and so does everything off the mask.
+    Without the table's plane, only the holes are filled."""
     plane, T, scale, mask, raw, gt = _scene(12)
     render = make_renderer("numpy").render(
         [RenderMesh(BOTTLE.vertices @ (scale * T[:3, :3]).T + T[:3, 3],
@@ -436,22 +438,26 @@ def test_repair_gives_a_part_the_model_lacks_its_objects_nearest_depth():
     right = xs[ys == mid].max()
     cols = np.arange(mask.shape[1])[None, :]
     handle = np.zeros_like(mask)
-    handle[mid - 12:mid + 12] = (cols > right + 8) & (cols <= right + 30)
+    handle[mid - 16:mid + 16] = (cols > right + 8) & (cols <= right + 30)
     table = make_renderer("numpy").render([_table_mesh(plane)], CAMERA).depth
     _, (iy, ix) = ndimage.distance_transform_edt(~drawn, return_indices=True)
     nearest = render.depth[iy, ix]
     raw = raw.copy()
-    third = np.arange(mask.shape[0])[:, None] - (mid - 12)
-    holes, through, front = (handle & (third // 8 == k) for k in range(3))
+    quarter = np.arange(mask.shape[0])[:, None] - (mid - 16)
+    holes, through, front, box = (handle & (quarter // 8 == k) for k in range(4))
     raw[holes] = 0
     raw[through] = table[through]
     raw[front] = nearest[front] - 0.02
-    assert np.all(table[through] > nearest[through] + 0.02)
+    raw[box] = (nearest[box] + table[box]) / 2
+    assert np.all(table[through | box] > nearest[through | box] + 0.04)
     ids = (drawn | handle).astype(int)
-    out = compose_depth(raw, ids, render.depth, [1])
-    assert holes.sum() == through.sum() == front.sum() == 8 * 22
+    out = compose_depth(raw, ids, render.depth, [1], plane=plane, K=K)
+    assert holes.sum() == through.sum() == front.sum() == box.sum() == 8 * 22
     assert np.abs(out - nearest)[holes | through].max() < 1e-6
-    assert np.array_equal(out[front], raw[front].astype(np.float32))
+    assert np.array_equal(out[front | box], raw[front | box].astype(np.float32))
     assert np.array_equal(out[ids == 0], raw[ids == 0].astype(np.float32))
-    kept = compose_depth(raw, ids, render.depth, [1], outside_render="keep")
+    alone = compose_depth(raw, ids, render.depth, [1])
+    assert np.abs(alone - nearest)[holes].max() < 1e-6
+    assert np.array_equal(alone[through], raw[through].astype(np.float32))
+    kept = compose_depth(raw, ids, render.depth, [1], plane=plane, K=K, outside_render="keep")
     assert np.array_equal(kept[handle], raw[handle].astype(np.float32))
