@@ -41,7 +41,9 @@ The steps:
    stands out (:func:`cuts_on_colour_edges`): a cut judged by the shapes the parts draw runs
    where their silhouettes meet best, the nearer glass's outline a few pixels away;
 11. outside a stereo camera's frames, the gaps in each instance's convex hull whose readings
-   are the table bent off its plane by the glass added to it (:func:`with_hull_gaps`).
+   are the table bent off its plane by the glass added to it (:func:`with_hull_gaps`);
+12. an instance no solid of revolution on the table draws well, or only one smaller than any
+   glassware, dropped (:func:`placeable`), unless it reaches the image's border.
 """
 
 from __future__ import annotations
@@ -123,6 +125,13 @@ CUT_CONTRAST_GAIN = 0.25  # share by which the colour contrast along that line m
 # moved line to be kept (cuts_on_colour_edges): on the real frames a cut moved by a watershed of
 # their faint colour raised it by 5-17% and was no better; the cuts through extsim's glasses by
 # 35-100%
+MIN_OBJECT_SIZE = 0.03  # m: an instance's revolution fit must be at least this tall or wide:
+# glassware is bigger (the smallest true objects on the shared real, extsim and generated
+# frames: 44 mm), slivers of dropouts or of an object's edge are not (19-28 mm: ClearGrasp 080
+# and Tracebot 014 resampled to 640x480, seed 1100's frame 4)
+MIN_FIT_IOU = 0.5  # least silhouette IoU of an instance's revolution fit: the true objects on
+# those frames fit at 0.75 or better (a pitcher with its handle 0.88), the outline of a patch of
+# holes along a geode's edge at 0.09 (ClearGrasp 123 resampled to 640x480)
 MAX_IMAGE_SHARE = 0.4  # most share of the image one instance covers: a region that large is the
 # table or the room failing as a whole, not an object standing on it
 BODY_SEED_HEIGHT = 0.015  # metres over the table: a reading this high is an object, not the
@@ -1044,7 +1053,22 @@ def segment_training_free(rgb: np.ndarray, depth_m: np.ndarray, K: np.ndarray, p
     found = _without_overlaps(lying_pieces_joined(found, K, plane, depth_m, glass, fits=fits,
                                                   apart=apart))
     found = cuts_on_colour_edges(found, rgb, lab)
-    return found if ev.stereo else with_hull_gaps(found, ev, depth_m > 0, beside_opaque)
+    found = found if ev.stereo else with_hull_gaps(found, ev, depth_m > 0, beside_opaque)
+    return [c for c in found if placeable(c.mask, fits)]
+
+
+def placeable(mask: np.ndarray, fits: "_PartFits") -> bool:
+    """Whether an instance ``mask (H, W) bool`` can be a glass object on the table: its
+    revolution fit (``fits``, :class:`_PartFits`) draws it at IoU :data:`MIN_FIT_IOU` or better
+    and is :data:`MIN_OBJECT_SIZE` tall or wide. One that reaches the image's border is kept
+    whatever its fit: the border may cut the object down to a sliver."""
+    if _on_image_border(mask):
+        return True
+    fit = fits(mask)
+    if fit is None or fit.iou < MIN_FIT_IOU:
+        return False
+    width = 2.0 * float(fit.profile[:, 0].max()) * fit.height
+    return max(fit.height, width) >= MIN_OBJECT_SIZE
 
 
 def lying_pieces_joined(found: list[Candidate], K: np.ndarray, plane: Plane,
