@@ -5,7 +5,8 @@ the nearest surface where objects overlap); elsewhere the sensor's depth is kept
 placed mesh does not cover take the nearest rendered depth within a few pixels
 (``outside_render: nearest``, the default; farther from the mesh, a part the model lacks such as
 a handle, they take their object's nearest rendered depth where the sensor reads nothing or
-reads the table behind it), keep the sensor's reading (``keep``) or take the table's depth (``plane``). Objects that could not be placed are left untouched.
+reads the table behind it), keep the sensor's reading (``keep``) or take the table's depth
+(``plane``). Objects that could not be placed are left untouched.
 
 A sensor reading inside a mask that lies more than :data:`NEARER` in front of the placed mesh
 stays (``keep_nearer``, the default): a depth camera reads the nearest surface on its ray, and
@@ -125,10 +126,7 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
         dist, (iy, ix) = ndimage.distance_transform_edt(~(render_depth > 0), return_indices=True)
         near = miss & (dist <= max_gap)
         out[near] = render_depth[iy[near], ix[near]]
-        far = miss & ~near
-        if far.any():
-            table = None if plane is None or K is None else plane.depth_image(raw_m.shape, K)
-            beyond_the_model(out, raw_m, ids, render_depth, far, placed_ids, table)
+        beyond_the_model(out, raw_m, ids, render_depth, miss & ~near, placed_ids, plane, K)
     elif outside_render == "plane" and plane is not None and K is not None:
         out[miss] = plane.depth_image(raw_m.shape, K)[miss]
     return out
@@ -136,16 +134,16 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
 
 def beyond_the_model(out: np.ndarray, raw_m: np.ndarray, ids: np.ndarray,
                      render_depth: np.ndarray, far: np.ndarray, placed_ids: list[int],
-                     table: np.ndarray | None = None) -> None:
+                     plane: Plane | None = None, K: np.ndarray | None = None) -> None:
     """Depth for the mask pixels ``far (H, W) bool`` that the placed mesh leaves uncovered by
     more than a few pixels: a part of the object its model lacks (a handle, a spout, a lid's
     rim) or a wider mask. Each takes, in ``out (H, W) float32`` metres, the rendered depth of
     its own object's nearest covered pixel where the sensor read nothing there or, given the
-    table's depth ``table (H, W)`` metres (0 where a ray misses it), read the table (or
-    beyond it) :data:`BEHIND` beyond that depth: seen through the part. Other readings stay:
-    one in front is the part's own surface or an occluder, one above the table behind it
-    (a wall, a box) is what a mask reaching past its object holds. raw_m, render_depth :
-    (H, W) metres (0 = none); ids : (H, W) instance ids."""
+    table's ``plane`` and the camera's ``K (3, 3)``, read the table (or beyond it)
+    :data:`BEHIND` beyond that depth: seen through the part. Other readings stay: one in
+    front is the part's own surface or an occluder, one above the table behind it (a wall, a
+    box) is what a mask reaching past its object holds. raw_m, render_depth : (H, W) metres
+    (0 = none); ids : (H, W) instance ids."""
     for k in placed_ids:
         mine = ids == k
         if not (far & mine).any():
@@ -158,9 +156,9 @@ def beyond_the_model(out: np.ndarray, raw_m: np.ndarray, ids: np.ndarray,
         nearest = render_depth[box][iy, ix]
         raw = raw_m[box]
         lost = raw <= 0
-        if table is not None:
-            behind = table[box]
-            lost |= (raw > nearest + BEHIND) & (behind > 0) & (raw >= behind - ON_TABLE)
+        if plane is not None and K is not None:
+            table = plane.depth_image(raw.shape, window_K(K, box[1].start, box[0].start))
+            lost |= (raw > nearest + BEHIND) & (table > 0) & (raw >= table - ON_TABLE)
         fix = far[box] & mine[box] & lost
         out[box][fix] = nearest[fix]
 
