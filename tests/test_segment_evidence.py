@@ -1159,7 +1159,6 @@ def test_an_instance_is_placeable_only_as_a_glass_sized_solid_on_the_table():
     ring = np.zeros(glass.shape, np.uint8)
     cv2.circle(ring, (int(xs.mean()), int(ys.mean())), 40, 1, 6)
     assert fits(ring > 0).iou < 0.3 and not tf.placeable(ring > 0, fits)
-    ys, xs = np.nonzero(glass)
     sliver = np.zeros(glass.shape, bool)
     sliver[ys.max() - 20:ys.max(), -12:] = True  # an object cut by the image's right border
     inside = np.roll(sliver, -40, axis=1)
