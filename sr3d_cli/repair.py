@@ -144,10 +144,8 @@ def beyond_the_model(out: np.ndarray, raw_m: np.ndarray, ids: np.ndarray,
     front is the part's own surface or an occluder, one above the table behind it (a wall, a
     box) is what a mask reaching past its object holds. raw_m, render_depth : (H, W) metres
     (0 = none); ids : (H, W) instance ids."""
-    for k in placed_ids:
+    for k in np.unique(ids[far & np.isin(ids, placed_ids)]):
         mine = ids == k
-        if not (far & mine).any():
-            continue
         box = mask_window(mine, 0)
         own = mine[box] & (render_depth[box] > 0)
         if not own.any():
