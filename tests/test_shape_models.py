@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from sr3d_cli.config import ReconstructConfig
-from sr3d_cli.geometry.camera import Camera
+from sr3d_cli.geometry.camera import Camera, unproject
 from sr3d_cli.geometry.revolution import revolve
 from sr3d_cli.reconstruct import Reconstructor, configured_fit, mouths
 from sr3d_cli.reconstruct.bowls import NARROW_TOP, bowl_instead
@@ -158,3 +158,26 @@ def test_a_dome_whose_readings_lie_on_it_is_not_taken_for_a_bowl():
                         lambda f: mouths(f, cfg)) is None
     rec = Reconstructor(cfg)(np.zeros(ids.shape + (3,), np.uint8), mask, K, plane, depth=depth)
     assert "open_top" not in rec.meta
+
+
+def test_a_standing_jar_whose_readings_lie_on_its_lid_stays_closed():
+    """A lidded jar (40 mm in radius, 90 mm tall) is wide enough at the top to be an open
+    vessel by its outline; its readings on the lid keep it shut. With the lid's readings gone
+    (a glass's mouth, where the sensor reads the floor inside or nothing), it is opened."""
+    profile = [[0, 0], [0.04, 0], [0.04, 0.09], [0, 0.09]]
+    ids, K, plane, depth = solids_on_table([(profile, 0.09, 0.0, 0.0)])
+    mask = ids == 1
+    rgb = np.zeros(ids.shape + (3,), np.uint8)
+    cfg = ReconstructConfig()
+    lidded = Reconstructor(cfg)(rgb, mask, K, plane, depth=depth)
+    assert "open_top" not in lidded.meta
+    v = lidded.mesh.vertices * lidded.meta["pose_hint"]["scale"]
+    assert v[:, 2].max() == pytest.approx(0.09, abs=0.006)
+    assert np.hypot(v[:, 0], v[:, 1])[v[:, 2] > v[:, 2].max() - 1e-6].min() < 1e-9  # a lid
+    ys, xs = np.nonzero(mask)
+    high = plane.height(unproject(np.column_stack([xs, ys]).astype(float), depth[ys, xs], K))
+    on_lid = np.zeros_like(mask)
+    on_lid[ys[high > 0.085], xs[high > 0.085]] = True
+    assert on_lid.sum() > 500
+    opened = Reconstructor(cfg)(rgb, mask, K, plane, depth=np.where(on_lid, 0.0, depth))
+    assert opened.meta.get("open_top")

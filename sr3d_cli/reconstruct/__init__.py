@@ -20,9 +20,10 @@ from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.geometry.transforms import apply_T, place_points
 from sr3d_cli.reconstruct.bowls import bowl_instead
 from sr3d_cli.reconstruct.handles import handle_slab, split_handle
-from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, FitOptions, RevolutionFit, carved,
-                                           fit_revolution, off_table_readings, raw_support,
-                                           smoothed, straight_walls)
+from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, FitOptions,
+                                           RevolutionFit, carved, fit_revolution,
+                                           off_table_readings, raw_support, smoothed,
+                                           straight_walls)
 
 BASE_SHARE = 0.15  # of the height: the profile's lowest part, whose widest ring is the base
 MIN_AXIS_PX = 10  # pixels the projected axis must span for its upper half to be told apart
@@ -151,19 +152,24 @@ def open_mouth(fit: RevolutionFit, cfg: ReconstructConfig, mask: np.ndarray, K: 
                plane: Plane, depth: np.ndarray | None) -> RevolutionFit | None:
     """The fit as an open vessel (drinking glass, beaker, goblet; see :func:`mouths`), so the
     depth inside it is rendered rather than a lid; None for a closed solid. Standing, the top
-    is the mouth when wide enough. Lying, an end is taken open only when the raw ``depth`` says
+    is the mouth when wide enough, unless the readings show a lid (below). Lying, an end is taken open only when the raw ``depth`` says
     so: of the off-table readings that miss the closed model's front surface, the open one
     takes in ``open_explains`` (and at least 5% of all), as when the camera sees into the
     mouth. A mouth turned away changes nothing the camera sees, and the model stays closed.
-    ``depth`` is used when ``use_depth`` is on."""
+    A standing top stays shut where the readings on its lid are evidence of one: the closed
+    model holds :data:`DEPTH_MIN_POINTS` readings more than the open one (a capped bottle or
+    a container with a wide shoulder; an open glass's readings lie inside it, on the open
+    model's floor and inner wall, never on a lid). ``depth`` is used when ``use_depth`` is on."""
     opened = mouths(fit, cfg)
-    if fit.resting == "standing":
-        return opened[0] if opened else None
-    if not opened or depth is None or not cfg.use_depth:
+    if not opened:
         return None
+    if depth is None or not cfg.use_depth:
+        return opened[0] if fit.resting == "standing" else None
     xs, ys, raw = off_table_readings(mask, depth, K, plane)
     closed, *counts = [raw_support(f, xs, ys, raw, K, mask.shape, DEPTH_BAND)
                        for f in [fit] + opened]
+    if fit.resting == "standing":
+        return None if closed - counts[0] >= DEPTH_MIN_POINTS else opened[0]
     best = int(np.argmax(counts))
     gained = counts[best] - closed
     return opened[best] if gained >= max(cfg.open_explains * (len(xs) - closed),
