@@ -80,7 +80,7 @@ class ReconstructConfig:
     backend: str = "revolution"
     masks: str = "segment"
     min_pixels: int = 100
-    allow_border: bool = False
+    allow_border: bool = True
     levels: int = 40
     iterations: int = 12
     sections: int = 48

@@ -24,7 +24,9 @@ it: where a glass stands in front of an opaque object, the segmenter leaves the 
 shows the object behind out of the mask (a dent in the outline), and that object's readings
 lie above the table.
 Holes within that reach the meshes do not cover (a glass's dropouts the mask and mesh miss) are
-inpainted from the depth around them (:func:`fill_holes_near`).
+inpainted from the depth around them (:func:`fill_holes_near`). A mesh placed from a mask the
+image border cuts is less sure of its size and place (the outline's foot or side is out of
+view): it changes the pixels of its own mask only (:func:`on_image_border`).
 """
 
 from __future__ import annotations
@@ -70,6 +72,12 @@ def hidden_beyond(raw_m: np.ndarray, outside: np.ndarray, render_depth: np.ndarr
     return drawn & (((raw_m <= 0) & near) | through)
 
 
+def on_image_border(ids: np.ndarray, placed_ids: list[int]) -> list[int]:
+    """The ``placed_ids`` whose pixels in ``ids (H, W)`` reach the image's border."""
+    edge = np.concatenate([ids[0], ids[-1], ids[:, 0], ids[:, -1]])
+    return [k for k in placed_ids if (edge == k).any()]
+
+
 def fill_holes_near(depth: np.ndarray, near: np.ndarray) -> None:
     """Inpaint (OpenCV, Telea, millimetres) ``depth (H, W) float32`` metres in place where it is
     0 and ``near (H, W) bool`` (within reach of a mask), from the depth around each hole, in a
@@ -88,12 +96,15 @@ def fill_holes_near(depth: np.ndarray, near: np.ndarray) -> None:
 def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
                   placed_ids: list[int], *, plane: Plane | None = None, K: np.ndarray | None = None,
                   outside_render: str = "nearest", max_gap: int = 6,
-                  beyond_mask: bool = False, keep_nearer: bool = False) -> np.ndarray:
+                  beyond_mask: bool = False, keep_nearer: bool = False,
+                  render_ids: np.ndarray | None = None) -> np.ndarray:
     """Repaired depth ``(H, W) float32`` metres.
 
     raw_m : sensor depth; ids : instance ids (H, W); render_depth : depth of the placed meshes
-    (0 = empty); placed_ids : the objects that were placed; beyond_mask : also replace the
-    readings the meshes hide just outside the masks (needs ``plane`` and ``K``); keep_nearer :
+    (0 = empty); placed_ids : the objects that were placed; render_ids : (H, W) the id of the
+    placed mesh drawn at each pixel (0 = none), where known; beyond_mask : also replace the
+    readings the meshes hide just outside the masks (needs ``plane`` and ``K``; given
+    ``render_ids``, not those of objects whose masks reach the image border); keep_nearer :
     keep the readings inside the masks that lie over :data:`NEARER` in front of the meshes.
     Mask pixels over ``max_gap`` px from the meshes: :func:`beyond_the_model` (the table's
     readings seen through a part there are known as such only given ``plane`` and ``K``).
@@ -108,6 +119,10 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
         box = mask_window(inside | (render_depth > 0), 2 * (HOLE_REACH + INPAINT_RADIUS))
         if box is not None:
             window, drawn = out[box], render_depth[box]
+            if render_ids is not None:
+                cut = on_image_border(ids, placed_ids)
+                if cut:
+                    drawn = np.where(np.isin(render_ids[box], cut), 0.0, drawn)
             off = (~inside[box]).astype(np.uint8)
             by_mask = cv2.distanceTransform(off, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) <= HOLE_REACH
             hulls = np.zeros(drawn.shape, bool)
@@ -169,7 +184,7 @@ def repair_frame(raw_m: np.ndarray, ids: np.ndarray, camera: Camera, renderer: R
     render = renderer.render(placed_render_meshes(placed), camera, normals=False)
     return compose_depth(raw_m, ids, render.depth, [p[0] for p in placed], plane=plane,
                          K=camera.K, outside_render=outside_render, beyond_mask=beyond_mask,
-                         keep_nearer=keep_nearer)
+                         keep_nearer=keep_nearer, render_ids=render.ids)
 
 
 def plane_fill(raw_m: np.ndarray, mask: np.ndarray, plane: Plane, K: np.ndarray) -> np.ndarray:

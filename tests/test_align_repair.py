@@ -345,6 +345,15 @@ def test_repair_beyond_the_mask_fills_what_the_mesh_hides_and_keeps_what_is_in_f
     assert np.all(filled[holes & (reach > 15)] == 0)  # far from every mask a hole stays one
     assert np.array_equal(filled[occluder], raw[occluder])
     assert np.array_equal(filled[~mask], raw[~mask])  # off the object: the sensor's depth
+    drawn = dict(plane=plane, K=K, beyond_mask=True, render_ids=render.ids)
+    assert np.array_equal(compose_depth(raw, ids, render.depth, [1], **drawn), filled)
+    # a mask the image border cuts: its mesh changes the pixels of its mask only
+    cut = ids.copy()
+    cut[ys.max():, xs.min()] = 1
+    assert cut[-1].any()
+    alone = compose_depth(raw, cut, render.depth, [1], **drawn)
+    assert np.array_equal(alone[through], raw[through])  # the sensor's, not the mesh's
+    assert np.array_equal(alone[cut == 1], filled[cut == 1])
 
 
 def test_repair_within_the_mask_hull_takes_the_mesh_over_an_object_seen_through_it():

@@ -748,7 +748,7 @@ def test_shape_error_on_generated_glassware(synth_set):
 
 
 def test_bad_masks_are_refused_with_the_reason():
-    cfg = ReconstructConfig()
+    cfg = ReconstructConfig(allow_border=False)
     mask = np.zeros((50, 60), bool)
     with pytest.raises(ObjectError, match="empty"):
         check_mask(mask, cfg)
@@ -759,7 +759,7 @@ def test_bad_masks_are_refused_with_the_reason():
     check_mask(mask, cfg)
     with pytest.raises(ObjectError, match="border"):
         check_border(mask, cfg, K)
-    assert check_border(mask, ReconstructConfig(allow_border=True), K) is None
+    assert check_border(mask, ReconstructConfig(), K) == "base or side"
 
 
 def _cut_bottle(u: float, v: float):
@@ -791,11 +791,30 @@ def test_a_bottle_whose_top_the_image_cuts_is_fitted_from_its_base_and_width():
 
 
 @pytest.mark.parametrize("u, v", [(15.0, 380.0), (330.0, 470.0)])
-def test_an_object_the_border_cuts_at_its_side_or_base_is_refused(u, v):
+def test_an_object_the_border_cuts_at_its_side_or_base_is_refused_only_when_asked(u, v):
     plane, _, _, mask = _cut_bottle(u, v)
     assert mask[0].any() or mask[-1].any() or mask[:, 0].any()
+    rgb = np.zeros((480, 640, 3), np.uint8)
     with pytest.raises(ObjectError, match="border lower than the upper half"):
-        Reconstructor(ReconstructConfig())(np.zeros((480, 640, 3), np.uint8), mask, K, plane)
+        Reconstructor(ReconstructConfig(allow_border=False))(rgb, mask, K, plane)
+    meta = Reconstructor(ReconstructConfig())(rgb, mask, K, plane).meta
+    assert meta["cut_by_border"] == "base or side" and meta["silhouette_iou"] > 0.97
+
+
+def test_a_bottle_whose_base_the_image_cuts_is_fitted_standing_near_its_place():
+    """The 30 cm bottle cut about 3 cm above its foot by the image's bottom row (and at its top
+    by the top row): standing, upright, its radius within 15% and its base within 4 cm of the
+    true ones (measured: 34.3 mm against 30, 32 mm off). Its size and place are a guess from
+    the outline that remains; the sensor's holes there would be far worse."""
+    plane, base, r, mask = _cut_bottle(330.0, 470.0)
+    result = Reconstructor(ReconstructConfig())(np.zeros((480, 640, 3), np.uint8), mask, K, plane)
+    meta = result.meta
+    assert meta["resting"] == "standing"
+    T = np.array(meta["pose_hint"]["T_cam_obj"])
+    assert np.degrees(np.arccos(min(1.0, T[:3, 2] @ plane.normal))) < 1
+    assert np.linalg.norm(T[:3, 3] - base) < 0.04
+    v = result.mesh.vertices * meta["pose_hint"]["scale"]
+    assert np.hypot(v[:, 0], v[:, 1]).max() == pytest.approx(r, rel=0.15)
 
 
 def _object_mask():

@@ -104,16 +104,18 @@ def cut_above_base(fit: RevolutionFit, edge: np.ndarray, shape: tuple[int, int],
 
 def check_border(mask: np.ndarray, cfg: ReconstructConfig, K: np.ndarray,
                  fit: RevolutionFit | None = None) -> str | None:
-    """Refuse an object the image border cuts, unless only above its base (see
-    :func:`cut_above_base`; needs the ``fit``) or ``allow_border`` is set. Returns 'top' for a
-    standing object cut above its base, else None."""
-    if cfg.allow_border:
-        return None
+    """Where the image border cuts the object: None where it does not, 'top' for a standing
+    object cut above its base (see :func:`cut_above_base`; needs the ``fit``), else
+    'base or side' with ``allow_border`` on (the default: its outline's foot or side is out of
+    view, and the fit's size and place are a guess, better than the sensor's holes) and
+    refused with it off."""
     edge = border_pixels(mask)
     if not len(edge):
         return None
     if fit is not None and cut_above_base(fit, edge, mask.shape, K):
         return "top"
+    if cfg.allow_border:
+        return "base or side"
     where = "" if fit is None else " lower than the upper half of a standing object"
     raise ObjectError(f"object touches the image border{where}, so its silhouette is cut "
                       "(set reconstruct.allow_border: true to try anyway)")
@@ -245,7 +247,7 @@ class RevolutionBackend:
         meta = {"backend": cfg.backend, "resting": fit.resting, "silhouette_iou": round(fit.iou, 4),
                 "pose_hint": {"T_cam_obj": fit.T_cam_obj.tolist(), "scale": fit.height}}
         if cut:
-            meta["cut_by_border"] = cut  # the top is out of view: its height is a guess
+            meta["cut_by_border"] = cut  # 'top': its height is a guess; else its size and place
         return fit, meta
 
     def __call__(self, rgb, mask, K, plane, label, depth, occluders) -> Reconstruction:
