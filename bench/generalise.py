@@ -46,6 +46,8 @@ PAIR_GAPS = (40, 100)  # px at 1280 wide between a one-object frame's object and
 PAIR_BAND = 15  # px at 1280 wide around the object copied with it (its holes, its shadow)
 SHIFTS = ((0, 1), (1, 0), (1, 1))  # (down, right) px: the frame moved by a pixel (shifted)
 VGA = (640, 480)  # (width, height) px: the size the real frames are also resampled to (resampled)
+BORDER_SHARE = 0.25  # share of an object's height (foot) or width (side) a border-cut crop drops
+BORDER_SIDES = ("foot", "side")  # where border_cut cuts: an object's foot or its left side
 
 
 def segmentation_scores(pred: np.ndarray, truth: np.ndarray) -> dict:
@@ -326,6 +328,65 @@ def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
     return out
 
 
+def border_cut(truth: np.ndarray, side: str) -> tuple[slice, slice] | None:
+    """The window (rows, columns) of a frame with true ids ``truth (H, W)`` whose border cuts
+    :data:`BORDER_SHARE` off one object: its lowest object's foot (``side`` "foot": the rows
+    above) or its leftmost object's left side ("side": the columns right of it). None for a
+    frame with no object."""
+    ids = [k for k in np.unique(truth) if k > 0]
+    if not ids:
+        return None
+    axis = 1 if side == "foot" else 0
+    spans = {k: np.nonzero((truth == k).any(axis=axis))[0] for k in ids}
+    if side == "foot":
+        span = spans[max(ids, key=lambda k: spans[k][-1])]
+        return slice(0, int(span[-1] - BORDER_SHARE * (span[-1] - span[0]))), slice(None)
+    span = spans[min(ids, key=lambda k: spans[k][0])]
+    return slice(None), slice(int(span[0] + BORDER_SHARE * (span[-1] - span[0])), None)
+
+
+def write_border_cuts(root: Path, out: Path, side: str) -> Path:
+    """Every frame below ``root`` cropped to its :func:`border_cut` window, written to ``out``
+    (emptied first) as a scene of sr3d's native layout each: colour, depth, camera (K moved
+    with the crop), true ids and depth. Returns ``out``."""
+    import json
+
+    shutil.rmtree(out, ignore_errors=True)
+    for source in discover_scenes(root, IOConfig(), None):
+        for fid in source.frame_ids():
+            frame = source.load_frame(fid)
+            truth = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
+            window = border_cut(truth, side)
+            if window is None:
+                continue
+            rows, cols = window
+            folder = out / source.frame_key(fid).replace("/", "_")
+            for sub in ("rgb", "depth", "gt/masks", "gt/depth"):
+                (folder / sub).mkdir(parents=True, exist_ok=True)
+            K = np.array(frame.camera.K, dtype=np.float64)
+            K[0, 2] -= cols.start or 0
+            K[1, 2] -= rows.start or 0
+            h, w = truth[window].shape
+            scale = frame.camera.depth_scale
+            (folder / "camera.json").write_text(json.dumps(
+                {"K": K.tolist(), "depth_scale": scale, "height": h, "width": w}))
+            cv2.imwrite(str(folder / "rgb" / "000000.png"),
+                        cv2.cvtColor(np.ascontiguousarray(frame.rgb[window]), cv2.COLOR_RGB2BGR))
+            write_depth(folder / "depth" / "000000.png", frame.depth_m[window], scale)
+            cv2.imwrite(str(folder / "gt" / "masks" / "000000.png"),
+                        np.ascontiguousarray(truth[window]).astype(np.uint16))
+            write_depth(folder / "gt" / "depth" / "000000.png",
+                        source.load_gt_depth(fid, truth.shape)[window], scale)
+    return out
+
+
+def border_cut_scores(root: Path, work: Path, cfg: Config) -> dict:
+    """:func:`run_set` on the frames below ``root`` cropped by :func:`write_border_cuts`, for
+    each of :data:`BORDER_SIDES`."""
+    return {side: run_set(write_border_cuts(root, work / f"border_{side}_frames", side),
+                          work / f"border_{side}", cfg) for side in BORDER_SIDES}
+
+
 def realdata_section(work: Path, cfg: Config) -> dict:
     root = SHARED / "realdata"
     if not root.is_dir():
@@ -336,6 +397,7 @@ def realdata_section(work: Path, cfg: Config) -> dict:
     out["pair"] = pair_scores(root, cfg)
     out["shifted"] = shift_scores(root, cfg)
     out["vga"] = resampled_scores(root, cfg)
+    out["border_cut"] = border_cut_scores(root, work, cfg)
     return out
 
 
@@ -406,6 +468,18 @@ def report(results: dict) -> list[str]:
                          f"aspect: a VGA frame is segmented whole, not halved; segment alone): "
                          f"detected {v['detection']:.2f}, mean best IoU {v['mean_iou']:.3f}, "
                          f"false instances per frame {v['false_per_frame']:.2f}")
+        if r.get("border_cut"):
+            lines.append(
+                f"- cut by the image border (simulated: each frame cropped so that the border "
+                f"cuts {BORDER_SHARE:.0%} off its lowest object's foot, or off its leftmost "
+                f"object's side; whole pipeline, object MAE over the true masks, mean / "
+                f"median): " + "; ".join(
+                    f"{side}: sr3d {1000 * b['depth']['sr3d']['mae']:.0f} / "
+                    f"{1000 * b['median_mae']['sr3d']:.0f} mm, raw "
+                    f"{1000 * b['depth']['raw']['mae']:.0f} / "
+                    f"{1000 * b['median_mae']['raw']:.0f} mm, detected {b['detection']:.2f}, "
+                    f"invented depth {100 * b['invented_share']:.2f}%"
+                    for side, b in r["border_cut"].items()))
         if "pose" in r:
             p = r["pose"]
             lines.append(
