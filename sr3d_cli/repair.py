@@ -26,7 +26,7 @@ lie above the table.
 Holes within that reach the meshes do not cover (a glass's dropouts the mask and mesh miss) are
 inpainted from the depth around them (:func:`fill_holes_near`). A mesh placed from a mask the
 image border cuts is less sure of its size and place (the outline's foot or side is out of
-view): it changes the pixels of its own mask only (:func:`on_image_border`).
+view): it changes the pixels of its own mask only.
 """
 
 from __future__ import annotations
@@ -35,7 +35,8 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from sr3d_cli.geometry.camera import Camera, convex_hull, mask_window, window_K
+from sr3d_cli.geometry.camera import (Camera, convex_hull, mask_window, on_image_border,
+                                      window_K)
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.transforms import place_points
 from sr3d_cli.render import RenderMesh, Renderer
@@ -70,12 +71,6 @@ def hidden_beyond(raw_m: np.ndarray, outside: np.ndarray, render_depth: np.ndarr
     if hulls is not None:
         through |= behind & hulls
     return drawn & (((raw_m <= 0) & near) | through)
-
-
-def on_image_border(ids: np.ndarray, placed_ids: list[int]) -> list[int]:
-    """The ``placed_ids`` whose pixels in ``ids (H, W)`` reach the image's border."""
-    edge = np.concatenate([ids[0], ids[-1], ids[:, 0], ids[:, -1]])
-    return [k for k in placed_ids if (edge == k).any()]
 
 
 def fill_holes_near(depth: np.ndarray, near: np.ndarray) -> None:
@@ -120,7 +115,7 @@ def compose_depth(raw_m: np.ndarray, ids: np.ndarray, render_depth: np.ndarray,
         if box is not None:
             window, drawn = out[box], render_depth[box]
             if render_ids is not None:
-                cut = on_image_border(ids, placed_ids)
+                cut = [k for k in placed_ids if on_image_border(ids == k)]
                 if cut:
                     drawn = np.where(np.isin(render_ids[box], cut), 0.0, drawn)
             off = (~inside[box]).astype(np.uint8)

@@ -422,7 +422,7 @@ def test_a_lying_glass_behind_a_standing_one_is_split_and_the_standing_one_kept_
     if rule:
         monkeypatch.setattr(training_free, rule, value)
     if rule == "OUTLINE_OWN_READINGS":
-        monkeypatch.setattr(training_free, "_on_image_border", lambda mask: True)
+        monkeypatch.setattr(training_free, "on_image_border", lambda mask: True)
     found = _segmented_ious(frame, gt)
     glasses = found[1], found[3]  # standing, lying
     assert (min(glasses) > worst) if rule is None else (min(glasses) < worst)

@@ -73,6 +73,11 @@ class Camera:
                 "depth_scale": self.depth_scale}
 
 
+def on_image_border(mask: np.ndarray) -> bool:
+    """Whether a mask ``(H, W) bool`` reaches the image's border."""
+    return bool(mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
+
+
 def mask_window(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
     """Rows and columns of the box of ``mask``'s (H, W) bool set pixels widened by ``margin``
     px, clipped to the image (None when none is set). cv2 scans a uint8 view of the image

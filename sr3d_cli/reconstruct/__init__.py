@@ -154,10 +154,11 @@ def open_mouth(fit: RevolutionFit, cfg: ReconstructConfig, mask: np.ndarray, K: 
                plane: Plane, depth: np.ndarray | None) -> RevolutionFit | None:
     """The fit as an open vessel (drinking glass, beaker, goblet; see :func:`mouths`), so the
     depth inside it is rendered rather than a lid; None for a closed solid. Standing, the top
-    is the mouth when wide enough, unless the readings show a lid (below). Lying, an end is taken open only when the raw ``depth`` says
-    so: of the off-table readings that miss the closed model's front surface, the open one
-    takes in ``open_explains`` (and at least 5% of all), as when the camera sees into the
-    mouth. A mouth turned away changes nothing the camera sees, and the model stays closed.
+    is the mouth when wide enough, unless the readings show a lid (below). Lying, an end is
+    taken open only when the raw ``depth`` says so: of the off-table readings that miss the
+    closed model's front surface, the open one takes in ``open_explains`` (and at least 5% of
+    all), as when the camera sees into the mouth. A mouth turned away changes nothing the
+    camera sees, and the model stays closed.
     A standing top stays shut where the readings on its lid are evidence of one: the closed
     model holds :data:`DEPTH_MIN_POINTS` readings more than the open one (a capped bottle or
     a container with a wide shoulder; an open glass's readings lie inside it, on the open

@@ -55,8 +55,8 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from sr3d_cli.geometry.camera import (convex_hull, depth_to_points, mask_window, unproject,
-                                      window_K)
+from sr3d_cli.geometry.camera import (convex_hull, depth_to_points, mask_window, on_image_border,
+                                      unproject, window_K)
 from sr3d_cli.geometry.occlusion import down_direction, in_front
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, DEPTH_SAMPLES,
@@ -218,11 +218,6 @@ def _cut_window(region: np.ndarray, margin: int) -> tuple[slice, slice]:
     rows, cols = mask_window(region, margin)
     return (slice(rows.start - rows.start % 2, rows.stop),
             slice(cols.start - cols.start % 2, cols.stop))
-
-
-def _on_image_border(mask: np.ndarray) -> bool:
-    """Whether a mask ``(H, W) bool`` reaches the image's border."""
-    return bool(mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
 
 
 def _embedded(window: np.ndarray, box: tuple[slice, slice], shape: tuple[int, int],
@@ -1062,7 +1057,7 @@ def placeable(mask: np.ndarray, fits: "_PartFits") -> bool:
     revolution fit (``fits``, :class:`_PartFits`) draws it at IoU :data:`MIN_FIT_IOU` or better
     and is :data:`MIN_OBJECT_SIZE` tall or wide. One that reaches the image's border is kept
     whatever its fit: the border may cut the object down to a sliver."""
-    if _on_image_border(mask):
+    if on_image_border(mask):
         return True
     fit = fits(mask)
     if fit is None or fit.iou < MIN_FIT_IOU:
@@ -2116,7 +2111,7 @@ def _held_cuts(region: np.ndarray, K: np.ndarray, plane: Plane, depth, glass, cl
     grouped = len(cuts)  # cuts past this one the readings made: only readings hold them
     # (but the footprint cut, see split_touching)
     footprint = None  # its index; it follows the readings, not the outline: ranked last
-    on_border = _on_image_border(region)
+    on_border = on_image_border(region)
     if readings is not None:
         cut, attached = _readings_cuts(region, readings, K, plane, min_area)
         if cut is not None:
