@@ -54,6 +54,13 @@ def placed_render_meshes(placed: list[tuple[int, object, np.ndarray, float]]) ->
             for k, mesh, T, scale in placed]
 
 
+def reads_table(raw_m: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """(H, W) bool: readings ``raw_m`` that lie on the table or beyond it (no nearer than its
+    depth ``table`` by :data:`ON_TABLE`), where the table is in view. Both (H, W) metres,
+    ``table`` 0 where a ray misses the plane."""
+    return (table > 0) & (raw_m >= table - ON_TABLE)
+
+
 def hidden_beyond(raw_m: np.ndarray, outside: np.ndarray, render_depth: np.ndarray,
                   near: np.ndarray, plane: Plane, K: np.ndarray,
                   hulls: np.ndarray | None = None) -> np.ndarray:
@@ -67,7 +74,7 @@ def hidden_beyond(raw_m: np.ndarray, outside: np.ndarray, render_depth: np.ndarr
         return drawn
     table = plane.depth_image(raw_m.shape, K)
     behind = raw_m > render_depth + BEHIND
-    through = behind & (table > 0) & (raw_m >= table - ON_TABLE)
+    through = behind & reads_table(raw_m, table)
     if hulls is not None:
         through |= behind & hulls
     return drawn & (((raw_m <= 0) & near) | through)
@@ -166,7 +173,7 @@ def beyond_the_model(out: np.ndarray, raw_m: np.ndarray, ids: np.ndarray,
         lost = raw <= 0
         if plane is not None and K is not None:
             table = plane.depth_image(raw.shape, window_K(K, box[1].start, box[0].start))
-            lost |= (raw > nearest + BEHIND) & (table > 0) & (raw >= table - ON_TABLE)
+            lost |= (raw > nearest + BEHIND) & reads_table(raw, table)
         fix = far[box] & mine[box] & lost
         out[box][fix] = nearest[fix]
 
