@@ -38,13 +38,16 @@ def _mug() -> tuple[trimesh.Trimesh, trimesh.Trimesh]:
     return body, trimesh.util.concatenate(parts)
 
 
-def _mug_frame():
+def _mug_frame(turn: float = 0.0):
     """A standing cylinder with a C-shaped handle of three boxes on its right (image +x),
-    seen from the tests' table camera. Returns (ids (H, W), K, plane, depth (H, W) m, the
-    handle's own depth (H, W) m (0 off it))."""
+    turned ``turn`` deg about the cylinder's axis away from the camera, seen from the tests'
+    table camera. Returns (ids (H, W), K, plane, depth (H, W) m, the handle's own depth
+    (H, W) m (0 off it))."""
     plane = table()
     up = plane.normal
+    t = np.radians(turn)
     x_dir = np.array([1.0, 0, 0])
+    x_dir = np.cos(t) * x_dir + np.sin(t) * np.cross(up, x_dir)
     R = np.stack([x_dir, np.cross(up, x_dir), up], 1)
     base = table_point(plane, 0.0, 0.0)
     body, handle = _mug()
@@ -56,6 +59,23 @@ def _mug_frame():
     alone = renderer.render(meshes[1:], cam)
     return out.ids, K_TABLE, plane, out.depth.astype(np.float64), \
         np.where(out.depth == alone.depth, alone.depth, 0.0).astype(np.float64)
+
+
+def _slab_depth_error(turn: float) -> tuple[float, float]:
+    """The handle of :func:`_mug_frame` (``turn``) split off and its slab placed on the body
+    fitted without it: (median |depth error| over the handle's seen pixels the slab covers
+    (m), the share of those pixels it covers)."""
+    ids, K, plane, depth, handle_depth = _mug_frame(turn)
+    body, handle = split_handle(ids == 1, K, plane)
+    truth = handle_depth > 0
+    fit = fit_revolution(body, K, plane, depth=depth)
+    slab = handle_slab(handle, int((ids == 1).sum()), fit.T_cam_obj, fit.height, K)
+    assert slab is not None and slab.is_watertight and slab.volume > 0
+    placed = RenderMesh(place_points(slab.vertices, fit.T_cam_obj, fit.height),
+                        np.asarray(slab.faces), 1)
+    drawn = make_renderer("numpy").render([placed], Camera(K, 640, 480)).depth
+    both = (drawn > 0) & truth
+    return float(np.median(np.abs(drawn[both] - handle_depth[both]))), both.sum() / truth.sum()
 
 
 def test_a_handle_is_split_off_and_the_body_fitted_without_it():
@@ -79,14 +99,19 @@ def test_a_handle_is_split_off_and_the_body_fitted_without_it():
     assert r_body == pytest.approx(BODY_R, rel=0.04)
     assert r_all > 1.1 * BODY_R
     # the slab over the handle's pixels lies within a tube's width of the true handle's depth
-    slab = handle_slab(handle, fit.T_cam_obj, fit.height, K)
-    assert slab is not None and slab.is_watertight and slab.volume > 0
-    placed = RenderMesh(place_points(slab.vertices, fit.T_cam_obj, fit.height),
-                        np.asarray(slab.faces), 1)
-    drawn = make_renderer("numpy").render([placed], Camera(K, 640, 480)).depth
-    both = (drawn > 0) & truth
-    assert both.sum() > 0.8 * truth.sum()
-    assert np.median(np.abs(drawn[both] - handle_depth[both])) < TUBE
+    error, covered = _slab_depth_error(0.0)
+    assert covered > 0.8 and error < TUBE
+
+
+@pytest.mark.parametrize("turn", [20.0, 30.0, 40.0])
+def test_a_handle_turned_towards_the_back_is_placed_in_its_own_plane(turn):
+    """Seen from above, a handle turned away from the camera lies farther along its rays than
+    the plane across the line of sight, which lifts it above the body's top. Measured, median
+    depth error over the handle: 2.8, 7.4, 3.8 mm (20, 30, 40 deg); in the plane across the
+    line of sight, no slab at all (the handle stands above the body). Side-on: 6.1 mm (0.6 mm
+    in the plane across the line of sight)."""
+    error, covered = _slab_depth_error(turn)
+    assert covered > 0.8 and error < TUBE
 
 
 def _lying_mug_frame(turn: float, side: float):

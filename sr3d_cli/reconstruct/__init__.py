@@ -272,15 +272,17 @@ class RevolutionBackend:
         else:
             built = Reconstruction(revolve(fit.profile, cfg.sections), meta,
                                    unseen_mouth(fit, cfg))
-        return with_handle(built, handle, K)
+        return with_handle(built, handle, int(mask.sum()), K)
 
 
-def with_handle(built: Reconstruction, handle: np.ndarray, K: np.ndarray) -> Reconstruction:
-    """``built`` with a slab over the ``handle (H, W) bool`` pixels split off its mask
-    (:func:`sr3d_cli.reconstruct.handles.handle_slab`) unioned to its mesh as a closed
-    component of its own; ``built`` as it is when there is none."""
+def with_handle(built: Reconstruction, handle: np.ndarray, mask_pixels: int, K: np.ndarray
+                ) -> Reconstruction:
+    """``built`` with a slab over the ``handle (H, W) bool`` pixels split off its mask of
+    ``mask_pixels`` pixels (:func:`sr3d_cli.reconstruct.handles.handle_slab`) unioned to its
+    mesh as a closed component of its own; ``built`` as it is when there is none."""
     hint = built.meta["pose_hint"]
-    slab = handle_slab(handle, np.asarray(hint["T_cam_obj"]), float(hint["scale"]), K)
+    slab = handle_slab(handle, mask_pixels, np.asarray(hint["T_cam_obj"]),
+                       float(hint["scale"]), K)
     if slab is None:
         return built
     built.meta["handle_pixels"] = int(handle.sum())

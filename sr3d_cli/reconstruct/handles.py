@@ -11,10 +11,13 @@ upright centre line (a goblet's stem and a flask's neck straddle it) or of the k
 long axis (a lying body's axis runs across the image: a lying pitcher's handle stands out
 beside it, and the upright line through the body may cross the handle).
 
-Its depth is modelled by a slab over the handle's own pixels, in the plane through the body's
-axis that faces the camera (a handle seen beside its body stands out sideways, at about the
-axis's distance), as thick as the handle's pixels are wide: a closed mesh unioned with the body
-as a separate component.
+Its depth is modelled by a slab over the handle's own pixels, as thick as they are wide, in
+the plane through the body's axis that the handle lies in: a closed mesh unioned with the body
+as a separate component. A handle seen side-on stands out beside its body in the plane across
+the line of sight; one turned towards the back of a body seen from above lies farther along its
+rays, and the plane across the line of sight lifts it above the body's top. The image leaves
+the turn open within the range of planes that keep the handle within the body's height; the
+slab is put in the middle of that range.
 """
 
 from __future__ import annotations
@@ -30,11 +33,17 @@ from sr3d_cli.geometry.transforms import apply_T
 
 OPEN_SHARE = 0.5  # opening disc diameter, as a share of the mask's widest inscribed radius
 MIN_SHARE = 0.02  # smallest handle, as a share of the mask's pixels
+SLAB_SHARE = 0.05  # smallest handle given a slab, as a share of its mask's pixels (a mug's or a
+# pitcher's handle holds 0.07-0.11 of it; a smaller part split off is a bump of the outline: the
+# body is fitted without it, and its pixels are left to repair)
 MAX_SHARE = 0.35  # largest handle, as a share of the mask's pixels (more is no handle)
 OUTSIDE_SHARE = 0.6  # least share of a handle's pixels outside the body's convex hull
 ONE_SIDE = 0.9  # least share of a handle's pixels on one side of the body's centre line
 SLAB_STEP = 2  # pixels per cell of the grid the slab is built on
-HEIGHT_SLACK = 0.05  # share of the body's height a slab may reach beyond either end of it
+HEIGHT_SLACK = 0.05  # share of the body's height a handle may reach beyond either end of it
+PLANE_TURNS = np.radians(np.arange(-75.0, 75.1, 2.5))  # turns about the axis of the handle's
+# plane from the one across the line of sight that are tried (a plane turned further is seen
+# nearly edge-on)
 WINDOW_MARGIN = 2  # pixels of background kept around a mask while its handle is looked for
 
 
@@ -99,20 +108,64 @@ def _beside(part: np.ndarray, body: np.ndarray, centre: np.ndarray, along: np.nd
         np.abs(side).mean() > half_width
 
 
-def handle_slab(handle: np.ndarray, T_cam_obj: np.ndarray, scale: float, K: np.ndarray
-                ) -> trimesh.Trimesh | None:
-    """A closed slab over the ``handle (H, W) bool`` pixels, in the object frame of a body
-    placed at ``T_cam_obj`` (4, 4) with ``scale`` (metres per object unit): centred on the
-    plane through the body's axis that faces the camera, as thick as the handle is wide in
-    the image. None when the handle is empty or that plane is seen edge-on."""
-    if not handle.any():
+def handle_plane(handle: np.ndarray, T_cam_obj: np.ndarray, scale: float, K: np.ndarray
+                 ) -> np.ndarray | None:
+    """The unit normal (3,), in the camera frame, of the plane through the axis of the body
+    placed at ``T_cam_obj`` (4, 4) with ``scale`` (metres per object unit) that the
+    ``handle (H, W) bool`` pixels are put in (see the module's docstring): of the planes
+    turned :data:`PLANE_TURNS` from the one across the line of sight, those that keep every
+    handle pixel within the body's height (and :data:`HEIGHT_SLACK`) form a range of turns
+    (the one nearest no turn, when there are two), and the plane is turned to its middle (the
+    turn the image leaves open within it). None when the handle is empty, the body is seen
+    from its axis, or no plane keeps the handle within its height."""
+    ys, xs = np.nonzero(handle)
+    if not len(ys):
         return None
-    base, axis = T_cam_obj[:3, 3], T_cam_obj[:3, 2]
-    mid = base + 0.5 * scale * axis
-    facing = -mid - (-mid @ axis) * axis  # towards the camera, across the axis
-    if np.linalg.norm(facing) < 1e-9:
+    axis, mid = T_cam_obj[:3, 2], T_cam_obj[:3, 3] + 0.5 * scale * T_cam_obj[:3, 2]
+    across = -mid - (-mid @ axis) * axis  # towards the camera, across the axis
+    if np.linalg.norm(across) < 1e-9:
         return None
-    facing /= np.linalg.norm(facing)
+    across /= np.linalg.norm(across)
+    side = np.cross(axis, across)
+    rays = np.column_stack([(xs - K[0, 2]) / K[0, 0], (ys - K[1, 2]) / K[1, 1], np.ones(len(xs))])
+    to_obj = np.linalg.inv(T_cam_obj)
+
+    def normal(turn: float) -> np.ndarray:
+        return np.cos(turn) * across + np.sin(turn) * side
+
+    def within(turn: float) -> bool:
+        along = rays @ normal(turn)
+        if (np.abs(along) < 1e-3).any() or (along * (mid @ normal(turn)) <= 0).any():
+            return False  # seen edge-on, or the rays meet the plane behind the camera
+        z = apply_T(to_obj, rays * ((mid @ normal(turn)) / along)[:, None])[:, 2] / scale
+        return z.min() >= -HEIGHT_SLACK and z.max() <= 1 + HEIGHT_SLACK
+
+    ok = np.array([within(t) for t in PLANE_TURNS])
+    if not ok.any():
+        return None
+    # the run of turns that keep the handle within the body's height nearest no turn
+    first = int(np.argmin(np.where(ok, np.abs(PLANE_TURNS), np.inf)))
+    lo = hi = first
+    while lo > 0 and ok[lo - 1]:
+        lo -= 1
+    while hi < len(ok) - 1 and ok[hi + 1]:
+        hi += 1
+    return normal(0.5 * (PLANE_TURNS[lo] + PLANE_TURNS[hi]))
+
+
+def handle_slab(handle: np.ndarray, mask_pixels: int, T_cam_obj: np.ndarray, scale: float,
+                K: np.ndarray) -> trimesh.Trimesh | None:
+    """A closed slab over the ``handle (H, W) bool`` pixels split off a mask of
+    ``mask_pixels`` pixels, in the object frame of a body placed at ``T_cam_obj`` (4, 4) with
+    ``scale`` (metres per object unit): centred on the plane :func:`handle_plane` finds, as
+    thick as the handle is wide in the image. None when the handle holds less than
+    :data:`SLAB_SHARE` of the mask, or there is no such plane."""
+    if handle.sum() < SLAB_SHARE * mask_pixels:
+        return None
+    normal = handle_plane(handle, T_cam_obj, scale, K)
+    if normal is None:
+        return None
+    mid = T_cam_obj[:3, 3] + 0.5 * scale * T_cam_obj[:3, 2]
     ys, xs = np.nonzero(handle)
     x0, y0 = xs.min(), ys.min()
     cells = cv2.resize(handle[y0:ys.max() + 1, x0:xs.max() + 1].astype(np.float32), None,
@@ -125,10 +178,10 @@ def handle_slab(handle: np.ndarray, T_cam_obj: np.ndarray, scale: float, K: np.n
     u = x0 + (verts[:, 1] - 1 + 0.5) * SLAB_STEP - 0.5
     v = y0 + (verts[:, 0] - 1 + 0.5) * SLAB_STEP - 0.5
     rays = np.column_stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones(len(u))])
-    denom = rays @ facing
+    denom = rays @ normal
     if (np.abs(denom) < 1e-6).any():
         return None
-    on_plane = rays * ((mid @ facing) / denom)[:, None]
+    on_plane = rays * ((mid @ normal) / denom)[:, None]
     z = on_plane[:, 2]
     width_px = 2.0 * float(cv2.distanceTransform(np.pad(handle, 1).astype(np.uint8),
                                                  cv2.DIST_L2, 5).max())
@@ -139,8 +192,6 @@ def handle_slab(handle: np.ndarray, T_cam_obj: np.ndarray, scale: float, K: np.n
     if not (pts[:, 2] > 0).all():
         return None
     obj = apply_T(np.linalg.inv(T_cam_obj), pts) / scale
-    if obj[:, 2].min() < -HEIGHT_SLACK or obj[:, 2].max() > 1 + HEIGHT_SLACK:
-        return None
     mesh = trimesh.Trimesh(obj, faces, process=True)
     if not mesh.is_watertight:
         return None
