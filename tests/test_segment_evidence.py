@@ -975,6 +975,53 @@ def _moved_segments(root, down: int, right: int, only: str = ""
     return out
 
 
+def test_a_table_split_by_a_glasss_dropouts_is_one_footprint_and_a_far_desk_no_part_of_it():
+    """A band of table readings cut in two by a glass's column of dropouts (its foot on the
+    image's lower border), the floor beyond the table's far edge reading below it, and a far
+    desk at the table's height beyond the floor: the footprint spans both halves of the table
+    and the glass between them, and not the desk (its hull with the table's would hold the
+    floor: 33% of it reads below the table; the two halves' hull none). Without the readings below the table it is the
+    larger half's hull only, and the glass lies outside it."""
+    on_table = np.zeros((240, 320), bool)
+    below = np.zeros_like(on_table)
+    on_table[160:, :140] = True  # the table's left half
+    on_table[160:, 170:] = True  # its right half, the larger
+    below[100:160, :] = True  # the floor beyond the table's far edge
+    on_table[60:100, 180:300] = True  # a far desk at the table's height
+    glass = (200, 155)
+    footprint = tf.table_footprint(on_table, below)
+    assert footprint[glass] and footprint[170, 20] and footprint[230, 310]
+    assert not footprint[80, 240]
+    alone = tf.table_footprint(on_table)
+    assert not alone[glass] and not alone[80, 240] and alone[230, 310]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("view, measured", [("000001", 0.596), ("000014", 0.720)])
+def test_a_container_whose_foot_the_border_cuts_is_found(realdata, monkeypatch, view,
+                                                         measured):
+    """Tracebot views 001 and 014 cropped so that the lower border cuts a quarter off the
+    container's foot: what is left of the table is a band, cut in two by the container's
+    dropouts. Measured: best IoU 0.596 and 0.720 with the footprint over both halves; 0.0
+    (nothing found) with the larger half's only (no patch joins)."""
+    from sr3d_cli.config import IOConfig
+    from sr3d_cli.io.formats import discover_scenes
+
+    def found() -> float:
+        (source,) = discover_scenes(realdata.parent / "tracebot-dev", IOConfig(), None)
+        frame = source.load_frame(view)
+        truth = source.load_mask(source.gt_mask_path(view), frame.depth_m.shape)
+        rows = np.nonzero(truth.any(axis=1))[0]
+        keep = slice(0, int(rows[-1] - 0.25 * (rows[-1] - rows[0])))
+        inst = Segmenter(SegmentConfig(), PlaneConfig())(view, frame.rgb[keep],
+                                                         frame.depth_m[keep], frame.camera.K)
+        return instance_ious(inst.ids, truth[keep])[1]
+
+    assert found() == pytest.approx(measured, abs=0.05)
+    monkeypatch.setattr(tf, "FOOTPRINT_PATCH", 2.0)
+    assert found() < 0.2
+
+
 def _instances_best(root, down: int, right: int, only: str) -> list[float]:
     """Each instance's best IoU with a true object, in the one frame of
     :func:`_moved_segments`."""

@@ -79,6 +79,11 @@ OWN_READINGS = 0.5  # share of a part's own readings its fit must hold and the w
 OUTLINE_OWN_READINGS = 0.25  # OWN_READINGS where the outline gains too
 OUTLINE_REFUTED = 0.1  # share of a part's own readings its fit may miss that the whole's holds
 FOOTPRINT_APART = 0.03  # metres between two groups of readings on the table (_footprint_cut)
+FOOTPRINT_PATCH = 0.1  # least share of the largest patch of table readings another patch
+# holds to join the table's footprint (table_footprint) ...
+FOOTPRINT_BELOW = 0.2  # ... and the largest share of the joined hull's pixels reading below
+# the table (the shared real frames cut at a glass's foot: a table's two halves 0.11-0.12, a
+# far desk beyond the floor 0.35-0.54)
 BORDER_REACH = 0.1  # share of the image width along its sides where holes may be the
 # camera's own (a stereo camera's invalid left band is baseline x fx / depth wide: ~100 px at
 # 0.5 m for a D415 at 1280 px); see evidence_maps
@@ -293,26 +298,53 @@ def table_noise_model(rough: np.ndarray, depth_m: np.ndarray, on_table: np.ndarr
     return model.astype(np.float32)
 
 
-def table_footprint(on_table: np.ndarray) -> np.ndarray:
-    """``(H, W) bool``: the convex hull of the largest connected patch of table readings, the
-    image region where the table (and so anything standing on it) can be. Holes beyond it (a
-    white wall, the floor, the far room) are sensor dropouts, not glass."""
+def table_footprint(on_table: np.ndarray, below: np.ndarray | None = None) -> np.ndarray:
+    """``(H, W) bool``: the convex hull of the largest connected patch of table readings
+    ``on_table (H, W) bool``, the image region where the table (and so anything standing on
+    it) can be. Holes beyond it (a white wall, the floor, the far room) are sensor dropouts,
+    not glass.
+
+    A glass's column of dropouts can cut the table's readings in two (a frame whose lower
+    border runs through the glass's foot shows only a band of table, split by it): each other
+    patch of at least :data:`FOOTPRINT_PATCH` of the largest's pixels joins it, largest first,
+    where the hull of the joined patches has at most :data:`FOOTPRINT_BELOW` of its pixels
+    reading below the table (``below (H, W) bool``): the hull over two halves of one table
+    covers the glass between them, the hull over a far desk at the table's height covers the
+    floor beyond the table's edge."""
     patch = cv2.morphologyEx(on_table.astype(np.uint8), cv2.MORPH_OPEN, _disk(2))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(patch, 8)
     if count < 2:  # no table seen: no footprint to gate by
         return np.ones(on_table.shape, bool)
-    biggest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    return convex_hull(labels == biggest)
+    area = stats[:, cv2.CC_STAT_AREA]
+    order = 1 + np.argsort(-area[1:], kind="stable")
+    joined = labels == order[0]
+    footprint = convex_hull(joined)
+    if below is None:
+        return footprint
+    for k in order[1:]:
+        if area[k] < FOOTPRINT_PATCH * area[order[0]]:
+            break
+        hull = convex_hull(joined | (labels == k))
+        if (below & hull).sum() <= FOOTPRINT_BELOW * hull.sum():
+            joined |= labels == k
+            footprint = hull
+    return footprint
 
 
 def on_table_readings(depth_m: np.ndarray, K: np.ndarray, plane: Plane
                       ) -> tuple[np.ndarray, np.ndarray]:
     """Heights above the table ``(H, W) float`` metres (0 where no reading) and the readings
-    that lie on it ``(H, W) bool`` (within the sensor's depth-squared noise)."""
+    that lie on it ``(H, W) bool`` (within :func:`table_band`)."""
     valid = depth_m > 0
     height = np.where(valid, plane.height(depth_to_points(depth_m, K)), 0.0)
-    on_table = valid & (np.abs(height) < 0.004 * np.maximum(depth_m, 0.3) ** 2 + 0.002)
+    on_table = valid & (np.abs(height) < table_band(depth_m))
     return height, on_table
+
+
+def table_band(depth_m: np.ndarray) -> np.ndarray:
+    """``(H, W)`` metres: how far from the table's plane a reading at ``depth_m (H, W)``
+    metres still lies on it (the sensor's depth-squared noise)."""
+    return 0.004 * np.maximum(depth_m, 0.3) ** 2 + 0.002
 
 
 def colour_lab(rgb: np.ndarray) -> np.ndarray:
@@ -505,7 +537,7 @@ def evidence_maps(depth_m: np.ndarray, K: np.ndarray, plane: Plane, *, rough_fac
     valid = depth_m > 0
     height, on_table = on_table_readings(depth_m, K, plane)
     rough = roughness(depth_m)
-    footprint = table_footprint(on_table)
+    footprint = table_footprint(on_table, valid & (height < -table_band(depth_m)))
     holes = ~valid & (plane.depth_image(depth_m.shape, K) > 0)
     artefact = _border_artefacts(holes, max_object_share)
     # a glass rising above the table's far edge joins its outline of holes to the room's: the
