@@ -82,8 +82,8 @@ FOOTPRINT_APART = 0.03  # metres between two groups of readings on the table (_f
 FOOTPRINT_PATCH = 0.1  # least share of the largest patch of table readings another patch
 # holds to join the table's footprint (table_footprint) ...
 FOOTPRINT_BELOW = 0.2  # ... and the largest share of the joined hull's pixels reading below
-# the table (the shared real frames cut at a glass's foot: a table's two halves 0.11-0.12, a
-# far desk beyond the floor 0.35-0.54)
+# the table (on the shared real and extsim frames cut at a glass's foot: a table's two halves
+# 0.04-0.17, a far desk or the room beyond the floor 0.28-0.62)
 BORDER_REACH = 0.1  # share of the image width along its sides where holes may be the
 # camera's own (a stereo camera's invalid left band is baseline x fx / depth wide: ~100 px at
 # 0.5 m for a D415 at 1280 px); see evidence_maps
