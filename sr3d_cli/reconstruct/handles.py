@@ -134,10 +134,11 @@ def handle_plane(handle: np.ndarray, T_cam_obj: np.ndarray, scale: float, K: np.
         return np.cos(turn) * across + np.sin(turn) * side
 
     def within(turn: float) -> bool:
-        along = rays @ normal(turn)
-        if (np.abs(along) < 1e-3).any() or (along * (mid @ normal(turn)) <= 0).any():
+        n = normal(turn)
+        along, reach = rays @ n, mid @ n
+        if (np.abs(along) < 1e-3).any() or (along * reach <= 0).any():
             return False  # seen edge-on, or the rays meet the plane behind the camera
-        z = apply_T(to_obj, rays * ((mid @ normal(turn)) / along)[:, None])[:, 2] / scale
+        z = apply_T(to_obj, rays * (reach / along)[:, None])[:, 2] / scale
         return z.min() >= -HEIGHT_SLACK and z.max() <= 1 + HEIGHT_SLACK
 
     ok = np.array([within(t) for t in PLANE_TURNS])
