@@ -975,13 +975,14 @@ def _moved_segments(root, down: int, right: int, only: str = ""
     return out
 
 
-def test_a_table_split_by_a_glasss_dropouts_is_one_footprint_and_a_far_desk_no_part_of_it():
+def test_a_table_split_by_a_glasss_dropouts_is_one_footprint_and_a_far_desk_no_part_of_it(
+        monkeypatch):
     """A band of table readings cut in two by a glass's column of dropouts (its foot on the
     image's lower border), the floor beyond the table's far edge reading below it, and a far
     desk at the table's height beyond the floor: the footprint spans both halves of the table
     and the glass between them, and not the desk (its hull with the table's would hold the
-    floor: 33% of it reads below the table; the two halves' hull none). Without the readings
-    below the table it is the larger half's hull only, and the glass lies outside it."""
+    floor: 33% of it reads below the table; the two halves' hull none). With no patch joining
+    it is the larger half's hull only, and the glass lies outside it."""
     on_table = np.zeros((240, 320), bool)
     below = np.zeros_like(on_table)
     on_table[160:, :140] = True  # the table's left half
@@ -992,7 +993,8 @@ def test_a_table_split_by_a_glasss_dropouts_is_one_footprint_and_a_far_desk_no_p
     footprint = tf.table_footprint(on_table, below)
     assert footprint[glass] and footprint[170, 20] and footprint[230, 310]
     assert not footprint[80, 240]
-    alone = tf.table_footprint(on_table)
+    monkeypatch.setattr(tf, "FOOTPRINT_PATCH", 2.0)
+    alone = tf.table_footprint(on_table, below)
     assert not alone[glass] and not alone[80, 240] and alone[230, 310]
 
 

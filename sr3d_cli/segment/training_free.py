@@ -298,7 +298,7 @@ def table_noise_model(rough: np.ndarray, depth_m: np.ndarray, on_table: np.ndarr
     return model.astype(np.float32)
 
 
-def table_footprint(on_table: np.ndarray, below: np.ndarray | None = None) -> np.ndarray:
+def table_footprint(on_table: np.ndarray, below: np.ndarray) -> np.ndarray:
     """``(H, W) bool``: the convex hull of the largest connected patch of table readings
     ``on_table (H, W) bool``, the image region where the table (and so anything standing on
     it) can be. Holes beyond it (a white wall, the floor, the far room) are sensor dropouts,
@@ -319,8 +319,6 @@ def table_footprint(on_table: np.ndarray, below: np.ndarray | None = None) -> np
     order = 1 + np.argsort(-area[1:], kind="stable")
     joined = labels == order[0]
     footprint = convex_hull(joined)
-    if below is None:
-        return footprint
     for k in order[1:]:
         if area[k] < FOOTPRINT_PATCH * area[order[0]]:
             break
