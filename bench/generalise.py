@@ -7,7 +7,8 @@
   objects where the frames give true poses (Tracebot), the peak memory of one
   ``sr3d repair-depth`` worker over the frames, and segmentation on the same frames with a
   white cloth that returns no readings under their objects (a simulated dropout) and, on the
-  one-object frames, with the object copied beside itself (two alike side by side).
+  one-object frames, with the object copied beside itself (two alike side by side), and with
+  the colour as another exposure or a noisier sensor gives it (toned).
 - ``extsim``: ../shared/extsim (an independent renderer, scanned household meshes), the same
   pipeline plus the pose error and grasps judged on the true meshes.
 """
@@ -48,6 +49,11 @@ SHIFTS = ((0, 1), (1, 0), (1, 1))  # (down, right) px: the frame moved by a pixe
 VGA = (640, 480)  # (width, height) px: the size the real frames are also resampled to (resampled)
 BORDER_SHARE = 0.25  # share of an object's height (foot) or width (side) a border-cut crop drops
 BORDER_SIDES = ("foot", "side")  # where border_cut cuts: an object's foot or its left side
+TONES = {  # the colour as another camera or light gives it (toned): how, in words for reports
+    "darker": "every value times 0.55 (a shorter exposure)",
+    "paler": "every value's distance to white times 0.6 (a longer exposure, less contrast)",
+    "noisier": "Gaussian noise of 2% of the range added to each value (a dimmer room)",
+}
 
 
 def segmentation_scores(pred: np.ndarray, truth: np.ndarray) -> dict:
@@ -229,6 +235,28 @@ def resampled(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, K: np.ndarr
                        interpolation=cv2.INTER_NEAREST).astype(np.int32), K)
 
 
+def toned(rgb: np.ndarray, tone: str) -> np.ndarray:
+    """``rgb (H, W, 3) uint8`` as :data:`TONES` names ``tone`` changes it (the noise drawn
+    with a fixed seed), uint8."""
+    x = rgb.astype(np.float32) / 255.0
+    if tone == "darker":
+        x = x * 0.55
+    elif tone == "paler":
+        x = 1.0 - (1.0 - x) * 0.6
+    elif tone == "noisier":
+        x = x + np.random.default_rng(0).normal(0.0, 0.02, x.shape)
+    else:
+        raise ValueError(f"tone {tone!r}: one of {', '.join(TONES)}")
+    return np.clip(x * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+def tone_scores(root: Path, cfg: Config) -> dict:
+    """:func:`segment_modified` on every frame below ``root`` with its colour changed by each
+    of :data:`TONES` (:func:`toned`), the depth as it is: ``{tone: totals}``."""
+    return {tone: segment_modified(root, cfg, lambda frame, truth, tone=tone: (
+        toned(frame.rgb, tone), frame.depth_m, truth), tone) for tone in TONES}
+
+
 def resampled_scores(root: Path, cfg: Config) -> dict:
     """:func:`segment_modified` on every frame below ``root`` resampled to :data:`VGA`
     (:func:`resampled`)."""
@@ -397,6 +425,7 @@ def realdata_section(work: Path, cfg: Config) -> dict:
     out["pair"] = pair_scores(root, cfg)
     out["shifted"] = shift_scores(root, cfg)
     out["vga"] = resampled_scores(root, cfg)
+    out["toned"] = tone_scores(root, cfg)
     out["border_cut"] = border_cut_scores(root, work, cfg)
     return out
 
@@ -468,6 +497,12 @@ def report(results: dict) -> list[str]:
                          f"aspect: a VGA frame is segmented whole, not halved; segment alone): "
                          f"detected {v['detection']:.2f}, mean best IoU {v['mean_iou']:.3f}, "
                          f"false instances per frame {v['false_per_frame']:.2f}")
+        if r.get("toned"):
+            lines.append("- the colour as another exposure or sensor gives it (segment alone): " +
+                         "; ".join(f"{tone}, {TONES[tone]}: detected {p['detection']:.2f}, "
+                                   f"mean best IoU {p['mean_iou']:.3f}, false instances per "
+                                   f"frame {p['false_per_frame']:.2f}"
+                                   for tone, p in r["toned"].items()))
         if r.get("border_cut"):
             lines.append(
                 f"- cut by the image border (simulated: each frame cropped so that the border "

@@ -1194,6 +1194,31 @@ def test_a_container_copied_beside_itself_is_two_instances(realdata, monkeypatch
     assert max(best().values()) < 0.45
 
 
+@pytest.mark.parametrize("tone", ["darker", "paler", "noisier"])
+def test_a_container_is_found_in_another_exposure_or_a_noisier_sensor(realdata, monkeypatch,
+                                                                       tone):
+    """Tracebot view 066 with its colour changed as bench/generalise.py ``toned`` does (its
+    depth as it is): the container is one instance and nothing else is. Measured: best IoU
+    0.83 as given; 0.85 darker, 0.85 paler, 0.83 noisier (the table's colour spread, which
+    the colour rules are measured in, 2.0 as given, 1.5, 1.4, 2.7)."""
+    from sr3d_cli.config import IOConfig
+    from sr3d_cli.io.formats import discover_scenes
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "bench"))
+    from generalise import toned
+
+    (source,) = discover_scenes(realdata.parent / "tracebot-dev", IOConfig(), None)
+    (fid,) = [f for f in source.frame_ids() if "000066" in source.frame_key(f)]
+    frame = source.load_frame(fid)
+    truth = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
+    rgb = toned(frame.rgb, tone)
+    assert np.abs(rgb.astype(int) - frame.rgb).mean() > 3  # the colour did change
+    inst = Segmenter(SegmentConfig(), PlaneConfig())(fid, rgb, frame.depth_m, frame.camera.K)
+    assert len(inst.objects) == 1
+    (iou,) = instance_ious(inst.ids, truth).values()
+    assert iou >= 0.8
+
+
 def test_an_instance_is_placeable_only_as_a_glass_sized_solid_on_the_table():
     """placeable: a 10 cm glass's mask is (its revolution fit draws it at IoU 0.98); the same
     glass at 2 cm is not (fitted 2.1 cm tall, under MIN_OBJECT_SIZE), nor a ring of holes no
