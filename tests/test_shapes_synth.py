@@ -230,8 +230,13 @@ def _pipeline_on(kind: str, seed: int, root: Path) -> dict:
 # handle split off and modelled as a slab (heights -0.011 -0.099 +0.082 -0.043 -0.031 |
 # +0.032 +0.006 +0.051 -0.004 +0.001 | +0.096 -0.014 +0.083 -0.033 +0.086; IoU .960 .882 .956
 # .948 .967 | .889 .948 .964 .946 .929 | .962 .918 .937 .899 .930; MAE 2.4 21.1 5.4 5.0 3.9 |
-# 8.2 3.7 4.8 2.8 5.1 | 6.2 9.2 5.0 24.6 7.8 mm).
+# 8.2 3.7 4.8 2.8 5.1 | 6.2 9.2 5.0 24.6 7.8 mm). The bowl, fitted as a dome and taken for a
+# bowl where it is squat and its readings do not prefer the dome (reconstruct.bowls.WIDE_LOW;
+# the fourth, 2.6 times as many readings on the dome, stays one): heights -0.273 -0.295
+# -0.468 -0.691 -0.390, IoU .972 .955 .806 .926 .803, MAE 7.1 11.1 12.9 16.5 17.4 mm (all
+# left domes: MAE 20.0 20.6 18.4 16.5 18.1 mm).
 PIPELINE_BOUNDS = {
+    "bowl": (0.42, 0.72, 0.82, 0.78, 14.0, 19.0),
     "mug": (0.06, 0.12, 0.93, 0.86, 6.5, 25.0),
     "square_bottle": (0.03, 0.08, 0.92, 0.86, 7.0, 11.0),
     "thin_glass": (0.11, 0.13, 0.91, 0.87, 10.0, 30.0),
@@ -241,9 +246,9 @@ PIPELINE_BOUNDS = {
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", sorted(PIPELINE_BOUNDS))
 def test_pipeline_from_true_masks_on_new_shapes(kind, tmp_path):
-    """A handled mug, a square bottle and a thin open glass seen from above, each alone in a
-    424x240 frame: reconstructed height, silhouette IoU of the placed model against the true
-    mask and object depth MAE, over five seeds."""
+    """A handled mug, a square bottle, a thin open glass and a bowl seen from above, each
+    alone in a 424x240 frame: reconstructed height, silhouette IoU of the placed model against
+    the true mask and object depth MAE, over five seeds."""
     rows = [_pipeline_on(kind, seed, tmp_path) for seed in PIPELINE_SEEDS]
     height = np.abs([r["height"] for r in rows])
     iou = np.array([r["iou"] for r in rows])
