@@ -13,7 +13,7 @@ kept when :data:`BOWL_VOTE` times as many lie on it as on the dome. Where neithe
 many times the other's readings (a glass bowl's front and the table seen through it lie about
 as well on a dome), a dome at least :data:`WIDE_LOW` times as wide as it is tall is taken for
 a bowl: glassware that squat on a table is one (the bowls of sr3d's generator and of extsim
-fitted as domes: 2.0-7.7 times as wide as tall; every bottle and flask whose fit narrows
+fitted as domes: 1.9-7.7 times as wide as tall; every bottle and flask whose fit narrows
 upwards, on the shared and generated frames: at most 0.94). A dome whose readings lie on it
 stays one.
 """
