@@ -434,7 +434,10 @@ def extsim_section(work: Path, cfg: Config) -> dict:
     root = SHARED / "extsim"
     if not root.is_dir():
         return {"skipped": f"{root} not present"}
-    return run_set(root, work / "extsim", cfg, grasps=True)
+    out = run_set(root, work / "extsim", cfg, grasps=True)
+    out["shifted"] = shift_scores(root, cfg)
+    out["toned"] = tone_scores(root, cfg)
+    return out
 
 
 def report(results: dict) -> list[str]:
@@ -484,8 +487,10 @@ def report(results: dict) -> list[str]:
                                    f"false instances per frame {p['false_per_frame']:.2f}"
                                    for gap, p in r["pair"].items()))
         if r.get("shifted"):
-            lines.append("- the same frames moved by one pixel (the segmenter's 2x2 reduction "
-                         "then keeps another reading of each block; segment alone): " +
+            why = "the segmenter's 2x2 reduction then keeps another reading of each block" \
+                if key == "realdata" else "every outline then falls on the pixel grid " \
+                "another way"
+            lines.append(f"- the same frames moved by one pixel ({why}; segment alone): " +
                          "; ".join(f"down {key.split(',')[0]}, right {key.split(',')[1]}: "
                                    f"detected {p['detection']:.2f}, mean best IoU "
                                    f"{p['mean_iou']:.3f}, false instances per frame "
