@@ -20,6 +20,7 @@ from sr3d_cli.geometry.revolution import open_vessel, revolve
 from sr3d_cli.geometry.transforms import apply_T, place_points
 from sr3d_cli.reconstruct.bowls import bowl_instead
 from sr3d_cli.reconstruct.handles import handle_slab, split_handle
+from sr3d_cli.reconstruct.lids import lid_read
 from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, FitOptions,
                                            RevolutionFit, carved, fit_revolution,
                                            off_table_readings, raw_support, smoothed,
@@ -162,7 +163,9 @@ def open_mouth(fit: RevolutionFit, cfg: ReconstructConfig, mask: np.ndarray, K: 
     A standing top stays shut where the readings on its lid are evidence of one: the closed
     model holds :data:`DEPTH_MIN_POINTS` readings more than the open one (a capped bottle or
     a container with a wide shoulder; an open glass's readings lie inside it, on the open
-    model's floor and inner wall, never on a lid). ``depth`` is used when ``use_depth`` is on."""
+    model's floor and inner wall, never on a lid), or those within its rim lie at the rim's
+    height over the table (:func:`~sr3d_cli.reconstruct.lids.lid_read`: a lid seen from low
+    down). ``depth`` is used when ``use_depth`` is on."""
     opened = mouths(fit, cfg)
     if not opened:
         return None
@@ -172,7 +175,8 @@ def open_mouth(fit: RevolutionFit, cfg: ReconstructConfig, mask: np.ndarray, K: 
     closed, *counts = [raw_support(f, xs, ys, raw, K, mask.shape, DEPTH_BAND)
                        for f in [fit] + opened]
     if fit.resting == "standing":
-        return None if closed - counts[0] >= DEPTH_MIN_POINTS else opened[0]
+        shut = closed - counts[0] >= DEPTH_MIN_POINTS or lid_read(fit, mask, K, plane, depth)
+        return None if shut else opened[0]
     best = int(np.argmax(counts))
     gained = counts[best] - closed
     return opened[best] if gained >= max(cfg.open_explains * (len(xs) - closed),
