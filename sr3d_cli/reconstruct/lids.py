@@ -19,6 +19,7 @@ import numpy as np
 
 from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.plane import Plane
+from sr3d_cli.geometry.transforms import perpendiculars
 from sr3d_cli.shape.revolution_fit import DEPTH_BAND, DEPTH_MIN_POINTS, RevolutionFit
 
 LID_SHARE = 0.75  # of the readings within the rim's image (those above the rim left out) at
@@ -34,9 +35,7 @@ def rim_image(fit: RevolutionFit, K: np.ndarray, shape: tuple[int, int]) -> np.n
     ``shape``); none where the circle is behind the camera."""
     a = np.asarray(fit.axis, np.float64)
     top = np.asarray(fit.base, np.float64) + fit.height * a
-    u = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-    u /= np.linalg.norm(u)
-    v = np.cross(a, u)
+    u, v = perpendiculars(a)
     turn = np.linspace(0.0, 2.0 * np.pi, RIM_POINTS, endpoint=False)
     ring = top + fit.profile[-2, 0] * fit.height * (np.outer(np.cos(turn), u) +
                                                     np.outer(np.sin(turn), v))
