@@ -46,6 +46,30 @@ def test_support_plane_recovers_a_tilted_table():
     assert abs(plane.offset - d_true) < 0.003
 
 
+def test_support_plane_is_the_table_not_a_larger_wall_beside_it():
+    """A wall on the left holds more readings than the table (as where the sensor fails on a
+    white cloth over the table): the plane chosen is still the one the camera looks down on."""
+    K = np.array([[500.0, 0, 160], [0, 500, 120], [0, 0, 1]])
+    v, u = np.mgrid[0:240, 0:320]
+    rays = np.stack([(u - 160) / 500, (v - 120) / 500, np.ones_like(u, float)], -1)
+    table_n, table_d = np.array([0.0, -0.8, -0.6]), 0.5
+    wall_n = np.array([0.97, 0.19, -0.15]) / np.linalg.norm([0.97, 0.19, -0.15])
+    wall_d = 0.25
+    with np.errstate(divide="ignore"):
+        table = -table_d / (rays @ table_n)
+        wall = -wall_d / (rays @ wall_n)
+    depth = np.where((u < 190) & (wall > 0) & (wall < 3.0), wall, table)
+    depth[(u >= 190) & (v < 150)] = 0.0  # the cloth over most of the table reads nothing
+    rng = np.random.default_rng(0)
+    depth = (depth + rng.normal(0, 0.001, depth.shape)).astype(np.float32)
+    on_wall = (u < 190) & (depth > 0)
+    on_table = (u >= 190) & (depth > 0)
+    assert on_wall.sum() > 2 * on_table.sum()  # the largest plane is the wall
+    plane = support_plane(depth, K, PlaneConfig())
+    assert np.degrees(np.arccos(plane.normal @ table_n)) < 1.0
+    assert abs(plane.offset - table_d) < 0.005
+
+
 @pytest.mark.slow
 def test_training_free_masks_match_ground_truth(synth_set):
     """Floors on six generated scenes: mean IoU and the share of objects found (IoU > 0.5)."""

@@ -16,6 +16,9 @@ from sr3d_cli.geometry.camera import pixel_rays, project, unproject
 if TYPE_CHECKING:
     from sr3d_cli.config import PlaneConfig
 
+FACING = 0.9  # |cos| between a plane's normal and the optical axis above which the camera looks
+# straight down onto it (a wrist camera over a table): its tilt in the image is no evidence
+
 
 @dataclass(frozen=True)
 class Plane:
@@ -84,6 +87,17 @@ def _orient(normal: np.ndarray, offset: float) -> tuple[np.ndarray, float]:
     return normal, float(offset)
 
 
+def seen_from_above(plane: Plane) -> bool:
+    """Whether ``plane`` can be the table under the objects: the camera looks down onto it, so
+    its normal (towards the camera) points up in the image (negative y in the camera frame), or
+    the camera faces it squarely (:data:`FACING`). A wall beside or behind the table, seen
+    from a camera tilted down at the table, has a normal across the image or down it (a
+    ClearGrasp frame whose table the sensor fails on: the room's wall on the left holds more
+    readings)."""
+    n = plane.normal
+    return bool(n[1] < 0.0 or abs(n[2]) >= FACING)
+
+
 def plane_from_points(points: np.ndarray) -> tuple[np.ndarray, float]:
     """Least-squares plane through points ``(n >= 3, 3)``: (normal, offset), oriented."""
     centre = points.mean(axis=0)
@@ -133,7 +147,10 @@ def fit_support_plane(depth_m: np.ndarray, K: np.ndarray, *, threshold: float = 
     """Fit the table under the objects from valid raw depth.
 
     depth_m : (H, W) metres, 0 = no reading; exclude : (H, W) bool pixels not to use (e.g.
-    object masks). The inlier threshold grows with depth (stereo noise ~ z^2).
+    object masks). The inlier threshold grows with depth (stereo noise ~ z^2). The largest
+    plane is the table unless it is not :func:`seen_from_above` and the largest plane among
+    the other readings is, holding ``min_share`` of them all too (a wall larger in the image
+    than the table).
     Raises ValueError when no plane covers ``min_share`` of the valid pixels.
     """
     valid = depth_m > 0
@@ -148,11 +165,17 @@ def fit_support_plane(depth_m: np.ndarray, K: np.ndarray, *, threshold: float = 
         v, u = v[pick], u[pick]
     pts = unproject(np.column_stack([u, v]), depth_m[v, u], K)
     median_z = float(np.median(pts[:, 2])) if len(pts) else 1.0
-    plane, inliers = fit_plane_ransac(pts, threshold=threshold * max(1.0, median_z ** 2),
-                                      iterations=iterations, rng=rng)
+    threshold = threshold * max(1.0, median_z ** 2)
+    plane, inliers = fit_plane_ransac(pts, threshold=threshold, iterations=iterations, rng=rng)
     if inliers.mean() < min_share:
         raise ValueError(f"no support plane: the best plane holds {100 * inliers.mean():.0f}% "
                          f"of the valid depth (need {100 * min_share:.0f}%)")
+    if not seen_from_above(plane) and (~inliers).sum() >= max(3.0, min_share * len(pts)):
+        other, held = fit_plane_ransac(pts[~inliers], threshold=threshold,
+                                       iterations=iterations, rng=rng)
+        share = float(held.sum()) / len(pts)
+        if seen_from_above(other) and share >= min_share:
+            return Plane(other.normal, other.offset, share)
     return plane
 
 
