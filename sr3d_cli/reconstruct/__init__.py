@@ -96,7 +96,7 @@ def cut_above_base(fit: RevolutionFit, edge: np.ndarray, shape: tuple[int, int],
     uv = project(ring, K)
     if not ((uv >= 1).all() and (uv[:, 0] <= w - 2).all() and (uv[:, 1] <= h - 2).all()):
         return False
-    b, t = project(np.stack([fit.base, fit.base + fit.height * fit.axis]), K)
+    b, t = project(np.stack([fit.base, fit.top]), K)
     span = float((t - b) @ (t - b))
     if span < MIN_AXIS_PX ** 2:  # seen down its axis: no 'upper half' in the image
         return False

@@ -33,11 +33,9 @@ RIM_POINTS = 48  # points round the rim's circle drawn as its image
 def rim_image(fit: RevolutionFit, K: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Pixels ``(H, W) bool`` within the image of ``fit``'s top circle (camera ``K``, image
     ``shape``); none where the circle is behind the camera."""
-    a = np.asarray(fit.axis, np.float64)
-    top = np.asarray(fit.base, np.float64) + fit.height * a
-    u, v = perpendiculars(a)
+    u, v = perpendiculars(fit.axis)
     turn = np.linspace(0.0, 2.0 * np.pi, RIM_POINTS, endpoint=False)
-    ring = top + fit.profile[-2, 0] * fit.height * (np.outer(np.cos(turn), u) +
+    ring = fit.top + fit.profile[-2, 0] * fit.height * (np.outer(np.cos(turn), u) +
                                                     np.outer(np.sin(turn), v))
     out = np.zeros(shape, np.uint8)
     if (ring[:, 2] > 0).all():
@@ -52,7 +50,7 @@ def lid_read(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, plane: Plane,
     the rim's image (:func:`rim_image`), at least :data:`DEPTH_MIN_POINTS` and
     :data:`LID_SHARE` of those not above it lie within ``DEPTH_BAND`` of the rim's height over
     the table (readings higher up are of something else)."""
-    top = np.asarray(fit.base, np.float64) + fit.height * np.asarray(fit.axis, np.float64)
+    top = fit.top
     if abs(float(top @ fit.axis)) < LID_VIEW * float(np.linalg.norm(top)):
         return False
     ys, xs = np.nonzero(rim_image(fit, K, mask.shape) & mask & (depth > 0))

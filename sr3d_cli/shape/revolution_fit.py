@@ -61,11 +61,16 @@ class RevolutionFit:
     iou: float
     solid_below: float = 0.0
 
+    @property
+    def top(self) -> np.ndarray:
+        """The centre (3,) of the top end on the axis (camera frame, metres)."""
+        return self.base + self.height * self.axis
+
     def flipped(self) -> "RevolutionFit":
         """The same solid described from its other end (base and top swapped)."""
         profile = np.column_stack([self.profile[::-1, 0], 1.0 - self.profile[::-1, 1]])
-        return RevolutionFit(profile, self.base + self.height * self.axis, -self.axis,
-                             self.height, self.resting, self.iou)
+        return RevolutionFit(profile, self.top, -self.axis, self.height, self.resting,
+                             self.iou)
 
     @property
     def T_cam_obj(self) -> np.ndarray:
