@@ -199,7 +199,7 @@ def test_open_vessels_are_seen_from_above(tmp_path):
 def _pipeline_on(kind: str, seed: int, root: Path) -> dict:
     """One object of ``kind`` standing in a small frame; sr3d repair-depth from the true mask.
     Returns the placed height over the true one less 1, the placed model's silhouette IoU with
-    the true mask and the object's depth MAE (mm)."""
+    the true mask, the object's depth MAE (mm) and whether it was fitted standing or lying."""
     scene, out = root / f"{kind}{seed}", root / f"{kind}{seed}_out"
     cfg = SynthConfig(seed=seed, views=1, resolutions=[SMALL], objects=[1, 1],
                       distractors=[0, 0], lying_fraction=0.0)
@@ -222,7 +222,9 @@ def _pipeline_on(kind: str, seed: int, root: Path) -> dict:
     repaired = read_depth(out / "repaired" / "000000.png", cam["depth_scale"])
     return {"height": scale / truth["scale"] - 1,
             "iou": (model & mask).sum() / (model | mask).sum(),
-            "mae_mm": 1000 * np.abs(repaired - gt)[mask].mean()}
+            "mae_mm": 1000 * np.abs(repaired - gt)[mask].mean(),
+            "resting": json.loads((out / placed[0]["mesh"]).with_suffix(".json").read_text())[
+                "resting"]}
 
 
 # kind: (median |height error|, worst |height error|, median IoU, worst IoU, median MAE mm,
@@ -257,6 +259,39 @@ def test_pipeline_from_true_masks_on_new_shapes(kind, tmp_path):
     assert np.median(height) < h_med and height.max() < h_max, height
     assert np.median(iou) > iou_med and iou.min() > iou_min, iou
     assert np.median(mae) < mae_med and mae.max() < mae_max, mae
+
+
+FLAT_SEEDS = range(58, 68)  # ten flat bottles, seen 23-61 degrees off their axes
+
+
+@pytest.mark.slow
+def test_flat_bottles_take_their_height_from_the_readings(tmp_path):
+    """A flat bottle's outline is no surface of revolution's: seen 30-40 degrees off its axis,
+    the outline fit's height is a guess (seeds 58 and 67: 23% and 13% too tall), and the
+    readings' fit gives it. Ten flat bottles standing alone, from the true masks: mean
+    |height error| 0.065 (0.095 with the readings' fit only within 25 degrees of the axis),
+    mean object MAE 9.7 mm (10.2)."""
+    rows = [_pipeline_on("flat_bottle", seed, tmp_path) for seed in FLAT_SEEDS]
+    assert np.mean([abs(r["height"]) for r in rows]) < 0.08
+    assert np.mean([r["mae_mm"] for r in rows]) < 10.5
+
+
+FLAT_FROM_ABOVE = (41, 50, 51, 55, 56, 75, 77, 93, 98)  # of seeds 40-99: within 20 degrees
+
+
+@pytest.mark.slow
+def test_flat_bottles_seen_from_above_stand(tmp_path):
+    """Seen within 20 degrees of its axis, a standing flat bottle draws a rectangle that a
+    short lying solid fits better than a standing one (whose height the outline leaves open:
+    IoUs .92-.96 against .72-.83). Most of the readings lie above that lying fit's top, and
+    above the standing outline fit's too, but not above the readings' fit, which then stands:
+    the nine flat bottles of seeds 40-99 seen so, from the true masks, all stand, median
+    |height error| 0.046 and mean object MAE 15.1 mm (five of them lying 38-55% short, 0.383
+    and 19.8 mm, where a refuted standing outline fit left the lying one)."""
+    rows = [_pipeline_on("flat_bottle", seed, tmp_path) for seed in FLAT_FROM_ABOVE]
+    assert [r["resting"] for r in rows] == ["standing"] * len(rows)
+    assert np.median([abs(r["height"]) for r in rows]) < 0.1
+    assert np.mean([r["mae_mm"] for r in rows]) < 17.0
 
 
 RIM_BAND = 0.02  # of the height: the vertices this near the top of an open vessel are its rim

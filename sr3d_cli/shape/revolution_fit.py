@@ -1129,10 +1129,11 @@ class FitOptions:
     readings that count as evidence; depth_vote : times more readings a hypothesis needs to win
     by them; vote_iou_gap : IoU within which the readings decide; axial_view : degrees from the
     axis within which a standing solid is also fitted from the readings; axial_iou_gap : IoU
-    within which that fit is kept; refute_share : share of the readings above a lying fit's top
-    that refutes it; tilt_tolerance : IoU a tilted lying refit may lose; straight_top_gap : IoU a
-    straight-topped refit may lose; square_starts : also start a near-square outline's lying fit
-    across it."""
+    within which that fit is kept; poor_outline : outline IoU under which a standing fit is no
+    surface of revolution; poor_outline_view : ``axial_view`` for such a fit; refute_share :
+    share of the readings above a lying fit's top that refutes it; tilt_tolerance : IoU a tilted
+    lying refit may lose; straight_top_gap : IoU a straight-topped refit may lose;
+    square_starts : also start a near-square outline's lying fit across it."""
 
     levels: int = 40
     iterations: int = 12
@@ -1144,6 +1145,8 @@ class FitOptions:
     vote_iou_gap: float = 0.06
     axial_view: float = 25.0
     axial_iou_gap: float = 0.03
+    poor_outline: float = 0.9
+    poor_outline_view: float = 40.0
     refute_share: float = 0.25
     tilt_tolerance: float = 0.01
     straight_top_gap: float = 0.005
@@ -1250,28 +1253,32 @@ def _straight_top_kept(fit: RevolutionFit, model: _Model, outline: _Outline, K, 
 
 
 def _axial_kept(fit: RevolutionFit, outline: _Outline, K, plane, readings: _Readings,
-                opts: FitOptions) -> tuple[RevolutionFit, int]:
+                opts: FitOptions) -> tuple[RevolutionFit, int, RevolutionFit | None]:
     """The readings' fit (:func:`_fit_axial`) replaces the outline's if more readings lie on its
     surface and it is within ``axial_iou_gap`` IoU (off the axis, a flask's neck shifts against
-    its body and the outline fit wins). Returns the fit and the readings on its surface."""
+    its body and the outline fit wins). Returns the fit, the readings on its surface and the
+    readings' fit where it was made and not kept (else None)."""
     count = readings.on_surface(fit, opts.depth_band)
     down = _fit_axial(outline, K, plane, readings.points, opts.levels, opts.depth_band,
                       opts.depth_min_points)
     down_count = readings.on_surface(down, opts.depth_band) if down is not None else -1
     if down_count > count and down.iou >= fit.iou - opts.axial_iou_gap:
-        return down, down_count
-    return fit, count
+        return down, down_count, None
+    return fit, count, down
 
 
 def _by_readings(fits: list[tuple[float, RevolutionFit, int | None]], readings: _Readings,
-                 opts: FitOptions) -> RevolutionFit | None:
+                 opts: FitOptions, down: RevolutionFit | None = None) -> RevolutionFit | None:
     """Standing (fits[0]) against lying (fits[1]) by the readings: a refuted lying fit loses to
-    an unrefuted standing one; else, with the IoUs within ``vote_iou_gap``, the one with
-    ``depth_vote`` times more readings on its surface (at least ``depth_min_points``) wins.
-    None when the readings do not decide. The readings on the surfaces are counted only where
-    they are asked (IoUs that close)."""
-    if readings.refutes(fits[1][1], opts) and not readings.refutes(fits[0][1], opts):
-        return fits[0][1]  # readings high above a lying fit: it stands
+    an unrefuted standing one, the readings' fit ``down`` not kept for the standing one's
+    outline if that one is refuted too; else, with the IoUs within ``vote_iou_gap``, the one
+    with ``depth_vote`` times more readings on its surface (at least ``depth_min_points``)
+    wins. None when the readings do not decide. The readings on the surfaces are counted only
+    where they are asked (IoUs that close)."""
+    if readings.refutes(fits[1][1], opts):
+        for standing in (fits[0][1], down):
+            if standing is not None and not readings.refutes(standing, opts):
+                return standing  # readings high above a lying fit: it stands
     close = abs(fits[0][1].iou - fits[1][1].iou) <= opts.vote_iou_gap
     if not close:
         return None
@@ -1313,7 +1320,10 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *,
     A standing solid seen within ``axial_view`` degrees of its axis is also fitted from the
     readings (:func:`_fit_axial`); that fit is kept if more readings lie on its surface and its
     silhouette IoU is within ``axial_iou_gap`` of the outline fit's (a flask's thin neck leaves
-    few readings: the readings' height falls short where the outline has it right).
+    few readings: the readings' height falls short where the outline has it right). An outline
+    fit under ``poor_outline`` IoU is no surface of revolution (a square or flat bottle): its
+    height is a guess (a square oil bottle seen 26 degrees off its axis came out 40% too tall),
+    so the readings' fit is tried up to ``poor_outline_view`` degrees off the axis.
     Readings more than ``depth_band`` above a fit's highest point refute it: with the camera
     above the table, a ray meets the object's surface before anything lower behind it, so they
     can only be noise in front of it. A lying fit that ``refute_share`` of the readings (at least
@@ -1351,10 +1361,12 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *,
     readings = None if depth is None else \
         _Readings.of(mask, depth, K, plane, opts.depth_band, openings)
     outline = _Outline.of(mask, occluders)
-    axial = readings is not None and _view_angle(outline.centre, K, plane) < opts.axial_view
+    # degrees off the axis; without readings, no readings' fit
+    view = _view_angle(outline.centre, K, plane) if readings is not None else 180.0
     lying_starts = _lying_starts(outline, opts)
     lying_start = lying_starts[0]  # the one the lying fit won from (its tilted refit's too)
     fits = []  # (score, fit, readings on its surface when already counted)
+    down = None  # the standing readings' fit the outline's was kept over
     for resting in ("standing", "lying") if opts.allow_lying else ("standing",):
         starts = lying_starts if resting == "lying" else [(False, True, False)]
         found = _outline_fit(resting, starts, outline, K, plane, opts)
@@ -1366,15 +1378,16 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *,
             lying_start = start
         else:
             fit = _straight_top_kept(fit, model, outline, K, plane, readings, opts)
-            if axial:
-                fit, count = _axial_kept(fit, outline, K, plane, readings, opts)
+            if view < (opts.poor_outline_view if fit.iou < opts.poor_outline
+                       else opts.axial_view):
+                fit, count, down = _axial_kept(fit, outline, K, plane, readings, opts)
         fits.append((fit.iou + (opts.lying_margin if resting == "standing" else 0.0), fit,
                      count))
     if not fits:
         raise ValueError("the mask does not meet the support plane: cannot place an object")
     best = max(fits, key=lambda f: f[0])[1]
     if readings is not None and len(fits) == 2:
-        decided = _by_readings(fits, readings, opts)
+        decided = _by_readings(fits, readings, opts, down)
         best = best if decided is None else decided
     if best.resting == "lying":
         best = _tilted(best, lying_start, outline, K, plane, opts)
