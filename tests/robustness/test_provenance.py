@@ -172,8 +172,8 @@ def _outputs(root: Path) -> dict[str, bytes]:
 def test_ctrl_c_with_workers_exits_130_cleanly(small_scenes, tmp_path):
     src = tmp_path / "data"
     for i in range(2):  # enough frames that the run is still going when the signal comes
-        for copy in range(12):
-            shutil.copytree(small_scenes / f"scene_{i:04d}", src / f"s{i}{copy}")
+        for copy in range(30):  # (a loaded machine segments 24 in about 3 s)
+            shutil.copytree(small_scenes / f"scene_{i:04d}", src / f"s{i}{copy:02d}")
     clean, stopped = tmp_path / "clean", tmp_path / "stopped"
     cmd = [sys.executable, "-m", "sr3d_cli", "segment", str(src), "--workers", "2", "--out"]
     subprocess.run(cmd + [str(clean), "-q"], check=True, timeout=300)
