@@ -123,6 +123,7 @@ class AlignConfig:
     refine_hint: bool = False
     use_depth: bool = True
     depth_inlier: float = 0.01
+    depth_quantile: float = 0.35
     depth_min_share: float = 0.05
     depth_min_points: int = 30
     depth_samples: int = 400
@@ -240,9 +241,9 @@ ADVANCED: dict[str, tuple[str, ...]] = {
                     "open_base", "open_explains"),
     "align": ("views", "rolls", "yaw_steps", "max_rests", "alpha", "beta", "gamma", "patches",
               "contact_points", "top_candidates", "upright_prior", "hint_accept", "refine",
-              "refine_evals", "refine_hint", "use_depth", "depth_inlier", "depth_min_share",
-              "depth_min_points", "depth_samples", "depth_max_change", "depth_search",
-              "depth_vote", "depth_agree", "window"),
+              "refine_evals", "refine_hint", "use_depth", "depth_inlier", "depth_quantile",
+              "depth_min_share", "depth_min_points", "depth_samples", "depth_max_change",
+              "depth_search", "depth_vote", "depth_agree", "window"),
     "grasp": ("depths", "seed_bins", "redraws", "height_tolerance", "tilt_tolerance",
               "approaches", "pair_radius", "contact_band", "collision_points",
               "collision_margin", "tight_margins", "fallback_friction", "mesh_points", "stride",
@@ -288,7 +289,8 @@ RANGES: dict[str, tuple[float, float, bool]] = {
     **{key: SHARE for key in (
         "plane.min_share", "segment.max_object_share", "segment.min_score",
         "reconstruct.open_top_ratio",
-        "reconstruct.open_explains", "reconstruct.foreground_ratio", "align.depth_min_share",
+        "reconstruct.open_explains", "reconstruct.foreground_ratio", "align.depth_quantile",
+        "align.depth_min_share",
         "align.depth_agree", "synth.lying_fraction", "synth.hole_fraction",
         "synth.see_through_fraction")},
     "synth.elevation_deg": (0.0, 90.0, True),
