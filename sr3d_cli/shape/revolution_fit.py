@@ -1328,7 +1328,9 @@ def fit_revolution(mask: np.ndarray, K: np.ndarray, plane: Plane, *,
     above the table, a ray meets the object's surface before anything lower behind it, so they
     can only be noise in front of it. A lying fit that ``refute_share`` of the readings (at least
     ``depth_min_points``) refute loses to a standing one they do not, whatever the outline says
-    (a tall goblet seen steeply from above draws the outline of a short lying one).
+    (a tall goblet seen steeply from above draws the outline of a short lying one); where they
+    refute the standing outline fit too, to the readings' fit if they do not refute that (a
+    flat bottle seen down its axis: the outline leaves a standing fit's height open).
     Standing and lying are weighed with the lying axis parallel to the table; a lying winner is
     then fitted again resting on its hull, tilted (:func:`_resting_tilt`), and that fit is kept
     if its IoU is within ``tilt_tolerance`` of the flat one's.
