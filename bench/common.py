@@ -1,5 +1,5 @@
-"""What the benchmark's sections share: generated sets, staged scene copies, the timed repair of
-one frame and the one-core pin."""
+"""What the benchmark's sections share: generated sets, staged scene copies, a grasp planner per
+random draw, the timed repair of one frame and the one-core pin."""
 
 from __future__ import annotations
 
@@ -38,6 +38,21 @@ def generated_set(folder: Path, count: int, cfg: SynthConfig, renderer) -> None:
             write_scene(folder / f"scene_{i:04d}", i, cfg, renderer)
     folder.mkdir(parents=True, exist_ok=True)
     stamp.write_text(digest.hexdigest())
+
+
+def grasp_planners(grasp_cfg, draws: int) -> list:
+    """One grasp planner per random draw of seed points (``grasp.seed`` 0 .. draws-1), each
+    with ``grasp_cfg`` (the ``grasp`` config) otherwise."""
+    import copy
+
+    from sr3d_cli.grasp.planner import Planner
+
+    made = []
+    for seed in range(draws):
+        drawn = copy.copy(grasp_cfg)
+        drawn.seed = seed
+        made.append(Planner(drawn))
+    return made
 
 
 def staged(source, out: Path):

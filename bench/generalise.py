@@ -35,7 +35,7 @@ from sr3d_cli.pose_error import MATCH_IOU, evaluate_frame_poses, summarise
 from sr3d_cli.repair import inpaint_fill, plane_fill
 from sr3d_cli.segment import Segmenter
 
-from common import SHARED, one_core, staged, timed_repair
+from common import SHARED, grasp_planners, one_core, staged, timed_repair
 
 DETECTED_IOU = 0.5  # a true object is found when an instance overlaps it this well
 GRASP_DRAWS = 4  # extsim grasps: the random draws of seed points (grasp.seed 0, 1, ...) averaged
@@ -288,17 +288,8 @@ def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
     shutil.rmtree(work, ignore_errors=True)
     rows = {m: [] for m in ("raw", "plane-fill", "inpaint", "sr3d")}
     ious, false, invented, timings, frames, poses = [], [], [], [], [], []
-    planners = []
-    if grasps:
-        import copy
-
-        from sr3d_cli.grasp.planner import Planner
-
-        for seed in range(GRASP_DRAWS):
-            grasp_cfg = copy.copy(cfg.grasp)
-            grasp_cfg.seed = seed
-            planners.append(Planner(grasp_cfg))
-    judged = [[] for _ in planners]  # per draw, per frame
+    drawn = grasp_planners(cfg.grasp, GRASP_DRAWS) if grasps else []
+    judged = [[] for _ in drawn]  # per draw, per frame
     Pipeline(cfg).renderer  # its libraries load once per process, as in a batch: not a frame's
     for source in discover_scenes(root, IOConfig(), None):
         scene = staged(source, work / source.name)
@@ -330,9 +321,9 @@ def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
                      "inpaint": inpaint_fill(frame.depth_m, mask)}
             for m, p in preds.items():
                 rows[m].append(depth_metrics(p, gt, mask))
-            if planners:
+            if drawn:
                 write_depth(scene.output_path("repaired", fid), depth, frame.camera.depth_scale)
-                for draw, planner in enumerate(planners):
+                for draw, planner in enumerate(drawn):
                     with one_core():
                         t0 = time.perf_counter()
                         stages.grasp_frame(frame, planner, cfg.plane, "repaired")
@@ -356,7 +347,7 @@ def run_set(root: Path, work: Path, cfg: Config, grasps: bool = False) -> dict:
            "max_seconds": float(max(t["total"] for t in timings))}
     if poses:
         out["pose"] = summarise(poses)
-    if planners:
+    if drawn:
         from sr3d_cli.grasp.quality import overall
 
         draws = [overall(frames_judged) for frames_judged in judged]

@@ -39,8 +39,8 @@ from sr3d_cli.repair import inpaint_fill, plane_fill
 from sr3d_cli import stages
 
 # bench/common.py and bench/generalise.py: the script's folder is on the path
-from common import (OTHER_CONTACTS, ROOT, SHARED, generated_set, one_core, staged,
-                    timed_repair)
+from common import (OTHER_CONTACTS, ROOT, SHARED, generated_set, grasp_planners, one_core,
+                    staged, timed_repair)
 import generalise
 from report import plot, write_report
 
@@ -111,16 +111,7 @@ HELD_OUT_SEED = 1100  # read only as the totals below: see heldout_bench
 
 def _planners(cfg: Config) -> list:
     """One planner per random draw of seed points (:data:`GRASP_DRAWS`)."""
-    import copy
-
-    from sr3d_cli.grasp.planner import Planner
-
-    planners = []
-    for seed in range(GRASP_DRAWS):
-        grasp_cfg = copy.copy(cfg.grasp)
-        grasp_cfg.seed = seed
-        planners.append(Planner(grasp_cfg))
-    return planners
+    return grasp_planners(cfg.grasp, GRASP_DRAWS)
 
 
 def _over_draws(by_draw: list[list[dict]], by_class: bool = True) -> dict:
