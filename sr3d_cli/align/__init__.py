@@ -415,13 +415,12 @@ class Aligner:
         start = self._depth_vote(sub, raw, z_model, np.column_stack([xs, ys])[hit], plane, need)
         lo, hi = start * (1 - cfg.depth_max_change), start * (1 + cfg.depth_max_change)
         factor, inliers = start, np.zeros(len(raw), bool)
-        for _ in range(DEPTH_ROUNDS):
+        for last in [False] * (DEPTH_ROUNDS - 1) + [True]:  # the median centres the band
             inliers = np.abs(raw - factor * z_model) < cfg.depth_inlier
             if inliers.sum() < need:
                 return 1.0, {**info, "raw_inliers": int(inliers.sum())}
-            factor = float(np.clip(np.median(raw[inliers] / z_model[inliers]), lo, hi))
-        factor = float(np.clip(np.quantile(raw[inliers] / z_model[inliers], cfg.depth_quantile),
-                               lo, hi))
+            q = cfg.depth_quantile if last else 0.5
+            factor = float(np.clip(np.quantile(raw[inliers] / z_model[inliers], q), lo, hi))
         return factor, {**info, "raw_inliers": int(inliers.sum()),
                         "depth_factor": round(factor, ERROR_DIGITS)}
 
