@@ -8,7 +8,9 @@
   ``sr3d repair-depth`` worker over the frames, and segmentation on the same frames with a
   white cloth that returns no readings under their objects (a simulated dropout) and, on the
   one-object frames, with the object copied beside itself (two alike side by side), and with
-  the colour as another exposure or a noisier sensor gives it (toned).
+  the colour as another exposure or a noisier sensor gives it (toned), with the depth rounded
+  to millimetres as a camera writing 16-bit depth stores it (stored), and cropped so that the
+  image's border cuts an object (border_cut).
 - ``extsim``: ../shared/extsim (an independent renderer, scanned household meshes), the same
   pipeline plus the pose error and grasps judged on the true meshes.
 """
@@ -50,6 +52,7 @@ SHIFTS = ((0, 1), (1, 0), (1, 1))  # (down, right) px: the frame moved by a pixe
 VGA = (640, 480)  # (width, height) px: the size the real frames are also resampled to (resampled)
 BORDER_SHARE = 0.25  # share of an object's height (foot) or width (side) a border-cut crop drops
 BORDER_SIDES = ("foot", "side")  # where border_cut cuts: an object's foot or its left side
+STORED_STEP = 0.001  # m: the step of a RealSense's 16-bit depth at its default scale (millimetres)
 TONES = {  # the colour as another camera or light gives it (toned): how, in words for reports
     "darker": "every value times 0.55 (a shorter exposure)",
     "paler": "every value's distance to white times 0.6 (a longer exposure, less contrast)",
@@ -258,6 +261,19 @@ def tone_scores(root: Path, cfg: Config) -> dict:
         toned(frame.rgb, tone), frame.depth_m, truth), tone) for tone in TONES}
 
 
+def in_steps(depth: np.ndarray, step: float = STORED_STEP) -> np.ndarray:
+    """Depth ``(H, W)`` metres rounded to ``step`` metres, as a camera writing 16-bit depth
+    stores it (0 stays 0): ClearGrasp's frames are kept as float EXR, finer than that."""
+    return (np.round(depth / step) * step).astype(np.float32)
+
+
+def stored_scores(root: Path, cfg: Config) -> dict:
+    """:func:`segment_modified` on every frame below ``root`` with its depth rounded to
+    :data:`STORED_STEP` (:func:`in_steps`), the colour as it is."""
+    return segment_modified(root, cfg, lambda frame, truth: (
+        frame.rgb, in_steps(frame.depth_m), truth), "depth in millimetres")
+
+
 def resampled_scores(root: Path, cfg: Config) -> dict:
     """:func:`segment_modified` on every frame below ``root`` resampled to :data:`VGA`
     (:func:`resampled`)."""
@@ -378,7 +394,9 @@ def border_cut(truth: np.ndarray, side: str) -> tuple[slice, slice] | None:
 def write_border_cuts(root: Path, out: Path, side: str) -> Path:
     """Every frame below ``root`` cropped to its :func:`border_cut` window, written to ``out``
     (emptied first) as a scene of sr3d's native layout each: colour, depth, camera (K moved
-    with the crop), true ids and depth. Returns ``out``."""
+    with the crop), true ids and depth. Depths are written as float metres (``.npy``): the
+    crop changes nothing else, not even the depth's step (see :func:`stored_scores`).
+    Returns ``out``."""
     import json
 
     shutil.rmtree(out, ignore_errors=True)
@@ -402,10 +420,10 @@ def write_border_cuts(root: Path, out: Path, side: str) -> Path:
                 {"K": K.tolist(), "depth_scale": scale, "height": h, "width": w}))
             cv2.imwrite(str(folder / "rgb" / "000000.png"),
                         cv2.cvtColor(np.ascontiguousarray(frame.rgb[window]), cv2.COLOR_RGB2BGR))
-            write_depth(folder / "depth" / "000000.png", frame.depth_m[window], scale)
+            write_depth(folder / "depth" / "000000.npy", frame.depth_m[window], scale)
             cv2.imwrite(str(folder / "gt" / "masks" / "000000.png"),
                         np.ascontiguousarray(truth[window]).astype(np.uint16))
-            write_depth(folder / "gt" / "depth" / "000000.png",
+            write_depth(folder / "gt" / "depth" / "000000.npy",
                         source.load_gt_depth(fid, truth.shape)[window], scale)
     return out
 
@@ -428,6 +446,7 @@ def realdata_section(work: Path, cfg: Config) -> dict:
     out["shifted"] = shift_scores(root, cfg)
     out["vga"] = resampled_scores(root, cfg)
     out["toned"] = tone_scores(root, cfg)
+    out["stored"] = stored_scores(root, cfg)
     out["border_cut"] = border_cut_scores(root, work, cfg)
     return out
 
@@ -511,6 +530,13 @@ def report(results: dict) -> list[str]:
                                    f"mean best IoU {p['mean_iou']:.3f}, false instances per "
                                    f"frame {p['false_per_frame']:.2f}"
                                    for tone, p in r["toned"].items()))
+        if r.get("stored"):
+            p = r["stored"]
+            lines.append(f"- the depth rounded to {1000 * STORED_STEP:g} mm, as a camera writing "
+                         f"16-bit depth stores it (ClearGrasp's EXR holds finer values; Tracebot's "
+                         f"are already so; segment alone): detected {p['detection']:.2f}, mean "
+                         f"best IoU {p['mean_iou']:.3f}, false instances per frame "
+                         f"{p['false_per_frame']:.2f}")
         if r.get("border_cut"):
             lines.append(
                 f"- cut by the image border (simulated: each frame cropped so that the border "
