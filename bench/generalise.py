@@ -10,7 +10,8 @@
   one-object frames, with the object copied beside itself (two alike side by side), and with
   the colour as another exposure or a noisier sensor gives it (toned), with the depth rounded
   to millimetres as a camera writing 16-bit depth stores it (stored), and cropped so that the
-  image's border cuts an object (border_cut).
+  image's border cuts an object (border_cut); the whole pipeline also runs on the frames moved
+  by one pixel (moved).
 - ``extsim``: ../shared/extsim (an independent renderer, scanned household meshes), the same
   pipeline plus the pose error and grasps judged on the true meshes.
 """
@@ -49,6 +50,7 @@ CLOTH_WHITE = 0.35  # share of each pixel's distance to white kept under the clo
 PAIR_GAPS = (40, 100)  # px at 1280 wide between a one-object frame's object and its copy
 PAIR_BAND = 15  # px at 1280 wide around the object copied with it (its holes, its shadow)
 SHIFTS = ((0, 1), (1, 0), (1, 1))  # (down, right) px: the frame moved by a pixel (shifted)
+MOVES = ((0, 1), (1, 0))  # (down, right) px: the moves the whole pipeline is run on (moved)
 VGA = (640, 480)  # (width, height) px: the size the real frames are also resampled to (resampled)
 BORDER_SHARE = 0.25  # share of an object's height (foot) or width (side) a border-cut crop drops
 BORDER_SIDES = ("foot", "side")  # where border_cut cuts: an object's foot or its left side
@@ -391,12 +393,13 @@ def border_cut(truth: np.ndarray, side: str) -> tuple[slice, slice] | None:
     return slice(None), slice(int(span[0] + BORDER_SHARE * (span[-1] - span[0])), None)
 
 
-def write_border_cuts(root: Path, out: Path, side: str) -> Path:
-    """Every frame below ``root`` cropped to its :func:`border_cut` window, written to ``out``
-    (emptied first) as a scene of sr3d's native layout each: colour, depth, camera (K moved
-    with the crop), true ids and depth. Depths are written as float metres (``.npy``): the
-    crop changes nothing else, not even the depth's step (see :func:`stored_scores`).
-    Returns ``out``."""
+def write_frames(root: Path, out: Path, make) -> Path:
+    """Every frame below ``root`` as ``make(frame, truth, true depth)`` changes it, written to
+    ``out`` (emptied first) as a scene of sr3d's native layout each: colour, depth, camera,
+    true ids and depth. ``make`` returns (rgb (H, W, 3) uint8, depth (H, W) metres, true ids
+    (H, W), true depth (H, W) metres, K (3, 3)), or None to leave the frame out. Depths are
+    written as float metres (``.npy``): the change is all that differs, not even the depth's
+    step (see :func:`stored_scores`). Returns ``out``."""
     import json
 
     shutil.rmtree(out, ignore_errors=True)
@@ -404,28 +407,41 @@ def write_border_cuts(root: Path, out: Path, side: str) -> Path:
         for fid in source.frame_ids():
             frame = source.load_frame(fid)
             truth = source.load_mask(source.gt_mask_path(fid), frame.depth_m.shape)
-            window = border_cut(truth, side)
-            if window is None:
+            made = make(frame, truth, source.load_gt_depth(fid, truth.shape))
+            if made is None:
                 continue
-            rows, cols = window
+            rgb, depth, ids, gt, K = made
             folder = out / source.frame_key(fid).replace("/", "_")
             for sub in ("rgb", "depth", "gt/masks", "gt/depth"):
                 (folder / sub).mkdir(parents=True, exist_ok=True)
-            K = np.array(frame.camera.K, dtype=np.float64)
-            K[0, 2] -= cols.start or 0
-            K[1, 2] -= rows.start or 0
-            h, w = truth[window].shape
+            h, w = ids.shape
             scale = frame.camera.depth_scale
             (folder / "camera.json").write_text(json.dumps(
-                {"K": K.tolist(), "depth_scale": scale, "height": h, "width": w}))
+                {"K": np.asarray(K, dtype=np.float64).tolist(), "depth_scale": scale,
+                 "height": h, "width": w}))
             cv2.imwrite(str(folder / "rgb" / "000000.png"),
-                        cv2.cvtColor(np.ascontiguousarray(frame.rgb[window]), cv2.COLOR_RGB2BGR))
-            write_depth(folder / "depth" / "000000.npy", frame.depth_m[window], scale)
+                        cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
+            write_depth(folder / "depth" / "000000.npy", depth, scale)
             cv2.imwrite(str(folder / "gt" / "masks" / "000000.png"),
-                        np.ascontiguousarray(truth[window]).astype(np.uint16))
-            write_depth(folder / "gt" / "depth" / "000000.npy",
-                        source.load_gt_depth(fid, truth.shape)[window], scale)
+                        np.ascontiguousarray(ids).astype(np.uint16))
+            write_depth(folder / "gt" / "depth" / "000000.npy", gt, scale)
     return out
+
+
+def write_border_cuts(root: Path, out: Path, side: str) -> Path:
+    """:func:`write_frames` with every frame cropped to its :func:`border_cut` window (K moved
+    with the crop)."""
+    def crop(frame, truth, gt):
+        window = border_cut(truth, side)
+        if window is None:
+            return None
+        rows, cols = window
+        K = np.array(frame.camera.K, dtype=np.float64)
+        K[0, 2] -= cols.start or 0
+        K[1, 2] -= rows.start or 0
+        return frame.rgb[window], frame.depth_m[window], truth[window], gt[window], K
+
+    return write_frames(root, out, crop)
 
 
 def border_cut_scores(root: Path, work: Path, cfg: Config) -> dict:
@@ -433,6 +449,23 @@ def border_cut_scores(root: Path, work: Path, cfg: Config) -> dict:
     each of :data:`BORDER_SIDES`."""
     return {side: run_set(write_border_cuts(root, work / f"border_{side}_frames", side),
                           work / f"border_{side}", cfg) for side in BORDER_SIDES}
+
+
+def moved_scores(root: Path, work: Path, cfg: Config) -> dict:
+    """:func:`run_set` on the frames below ``root`` moved by each of :data:`MOVES`
+    (:func:`shifted`, the true depth moved with them): ``{"down,right": totals}``. The whole
+    pipeline's spread over equally likely views of the same scenes: a change to the method
+    smaller than it is not measured."""
+    out = {}
+    for down, right in MOVES:
+        def move(frame, truth, gt, down=down, right=right):
+            rgb, depth, ids, K = shifted(frame.rgb, frame.depth_m, truth, frame.camera.K,
+                                         down, right)
+            return rgb, depth, ids, shifted(rgb, gt, truth, K, down, right)[1], K
+
+        frames = write_frames(root, work / f"moved_{down}{right}_frames", move)
+        out[f"{down},{right}"] = run_set(frames, work / f"moved_{down}{right}", cfg)
+    return out
 
 
 def realdata_section(work: Path, cfg: Config) -> dict:
@@ -448,6 +481,7 @@ def realdata_section(work: Path, cfg: Config) -> dict:
     out["toned"] = tone_scores(root, cfg)
     out["stored"] = stored_scores(root, cfg)
     out["border_cut"] = border_cut_scores(root, work, cfg)
+    out["moved"] = moved_scores(root, work / "realdata_moved", cfg)
     return out
 
 
@@ -458,6 +492,7 @@ def extsim_section(work: Path, cfg: Config) -> dict:
     out = run_set(root, work / "extsim", cfg, grasps=True)
     out["shifted"] = shift_scores(root, cfg)
     out["toned"] = tone_scores(root, cfg)
+    out["moved"] = moved_scores(root, work / "extsim_moved", cfg)
     return out
 
 
@@ -537,6 +572,15 @@ def report(results: dict) -> list[str]:
                          f"are already so; segment alone): detected {p['detection']:.2f}, mean "
                          f"best IoU {p['mean_iou']:.3f}, false instances per frame "
                          f"{p['false_per_frame']:.2f}")
+        if r.get("moved"):
+            lines.append(
+                "- the whole pipeline on the same frames moved by one pixel (as above; the "
+                "spread of every number here over equally likely views): " + "; ".join(
+                    f"down {key.split(',')[0]}, right {key.split(',')[1]}: detected "
+                    f"{m['detection']:.2f}, mean best IoU {m['mean_iou']:.3f}, object MAE "
+                    f"{1000 * m['depth']['sr3d']['mae']:.1f} / "
+                    f"{1000 * m['median_mae']['sr3d']:.1f} mm (mean / median)"
+                    for key, m in r["moved"].items()))
         if r.get("border_cut"):
             lines.append(
                 f"- cut by the image border (simulated: each frame cropped so that the border "
