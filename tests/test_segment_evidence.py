@@ -1267,3 +1267,37 @@ def test_the_slivers_of_a_cleargrasp_frame_resampled_to_vga_are_no_instances(rea
     monkeypatch.setattr(tf, "MIN_FIT_IOU", 0.0)
     ious = found()
     assert len(ious) == 4 and min(ious.values()) < 0.2
+
+
+def test_moved_frames_keep_their_truth_on_their_pixels(native_scene, tmp_path, monkeypatch):
+    """bench/generalise.py's frames moved by a pixel (``write_frames`` with ``shifted``): the
+    colour, the raw depth, the true ids and the true depth move together and K's principal
+    point with them, so that a pixel still holds its own truth; the depth is written as float
+    metres, not rounded to the 16-bit PNG's step. ``in_steps`` rounds to that step."""
+    from sr3d_cli.config import IOConfig
+    from sr3d_cli.io.formats import discover_scenes
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[1] / "bench"))
+    from generalise import in_steps, shifted, write_frames
+
+    def move(frame, truth, gt):
+        raw = np.where(frame.depth_m > 0, frame.depth_m + 0.0004, 0.0)  # off the 1 mm step
+        rgb, depth, ids, K = shifted(frame.rgb, raw, truth, frame.camera.K, 1, 2)
+        return rgb, depth, ids, shifted(rgb, gt, truth, K, 1, 2)[1], K
+
+    out = write_frames(native_scene, tmp_path / "moved", move)
+    (source,) = discover_scenes(native_scene, IOConfig(), None)
+    sources = discover_scenes(out, IOConfig(), None)
+    assert len(sources) == 2
+    for moved in sources:
+        fid = moved.frame_ids()[0]
+        frame = moved.load_frame(fid)
+        truth = moved.load_mask(moved.gt_mask_path(fid), frame.depth_m.shape)
+        gt = moved.load_gt_depth(fid, truth.shape)
+        assert frame.camera.K[0, 2] == pytest.approx(15.5 + 2)
+        assert frame.camera.K[1, 2] == pytest.approx(11.5 + 1)
+        assert np.array_equal(np.argwhere(truth > 0)[[0, -1]], [[9, 12], [14, 19]])
+        assert np.all(gt[truth > 0] == pytest.approx(0.45))
+        assert frame.depth_m[9, 18] == pytest.approx(0.5004, abs=1e-6)  # read, not rounded
+        assert frame.depth_m[9, 12] == 0  # the object's holes moved with it
+    assert np.array_equal(in_steps(np.array([0.0, 0.5004, 0.4996])), [0.0, 0.5, 0.5])
