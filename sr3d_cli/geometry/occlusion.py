@@ -89,3 +89,37 @@ def occluders(ids: np.ndarray, k: int, K: np.ndarray, plane: Plane) -> np.ndarra
         if in_front(window == j, window == k, down):
             out[y0:y1, x0:x1] |= window == j
     return out if out.any() else None
+
+
+SPILL_WIDTH = 2  # px: a mask's parts under 2 * SPILL_WIDTH + 1 px across beside another are spill
+SPILL_REACH = 4  # px from another instance within which a mask's thin parts are spill
+SPILL_SHARE = 0.1  # most of a mask taken as spill; a mask that would lose more is kept whole
+
+
+def without_spill(ids: np.ndarray, k: int) -> np.ndarray:
+    """Instance ``k``'s mask ``(H, W) bool`` of ``ids`` ``(H, W) int`` less its parts narrower
+    than a disc of radius :data:`SPILL_WIDTH` (an opening) within :data:`SPILL_REACH` px of
+    another instance. Where a segmenter cuts between two touching objects, bits of one a few
+    pixels across stick out along the other, and the outline fit takes such bits at an
+    outline's top for its rim (extsim scene 14: 18 px of the glass bowl's instance along the
+    pitcher behind it; the bowl fitted 72 mm tall with them, 52 mm without, its object error
+    25.6 -> 7.4 mm). Elsewhere, and where the opening would take over :data:`SPILL_SHARE` of
+    the mask, the mask is left as it is (a stem, a handle's side)."""
+    mask = ids == k
+    if not mask.any():
+        return mask
+    box = mask_window(mask, SPILL_REACH + 2 * SPILL_WIDTH + 1)
+    own = np.ascontiguousarray(mask[box])
+    others = (ids[box] > 0) & (ids[box] != k)
+    if not others.any():
+        return mask
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * SPILL_WIDTH + 1,) * 2)
+    opened = cv2.morphologyEx(own.view(np.uint8), cv2.MORPH_OPEN, disc) > 0
+    reach = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * SPILL_REACH + 1,) * 2)
+    near = cv2.dilate(others.view(np.uint8), reach) > 0
+    trimmed = np.where(near, opened, own)
+    if trimmed.sum() < (1 - SPILL_SHARE) * own.sum():
+        return mask
+    out = np.zeros_like(mask)
+    out[box] = trimmed
+    return out
