@@ -349,9 +349,11 @@ def stale(cfg, source: SceneSource, frame_id: str, stage: str) -> str | None:
 def reconstruct_frame(state: FrameState, reconstructor, record: dict | None = None
                       ) -> tuple[int, list[Problem]]:
     """Reconstruct every instance of a frame from its mask less the spill along the others
-    (:func:`without_spill`); returns (meshes written, object problems). Writes ``meshes/<frame>.json`` (the meshes written, with their fingerprints, the object
-    problems, ``frame_failed`` where there are instances and no mesh, and ``record``), removes
-    meshes of an earlier run no instance has now, and keeps the meshes in ``state``."""
+    that do not stand in front of it (:func:`without_spill`); returns (meshes written, object
+    problems). Writes ``meshes/<frame>.json`` (the meshes written, with their fingerprints,
+    the object problems, ``frame_failed`` where there are instances and no mesh, and
+    ``record``), removes meshes of an earlier run no instance has now, and keeps the meshes
+    in ``state``."""
     frame, source, fid = state.frame, state.source, state.frame_id
     ids, records = state.instances()
     plane, why = state.plane()
@@ -361,7 +363,7 @@ def reconstruct_frame(state: FrameState, reconstructor, record: dict | None = No
             if plane is None and reconstructor.needs_plane:
                 raise ValueError(why)
             front = state.occluders(k)
-            result = reconstructor(frame.rgb, without_spill(ids, k), frame.camera.K, plane,
+            result = reconstructor(frame.rgb, without_spill(ids, k, front), frame.camera.K, plane,
                                    records[k].get("label", ""), frame.depth_m, front)
         except ValueError as exc:  # ObjectError, and model/fit failures of this object
             problems.append(Problem(str(exc), k))

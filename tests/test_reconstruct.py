@@ -1091,8 +1091,9 @@ def test_a_glass_whose_foot_a_glass_in_front_hides_stands_where_it_stands(behind
 
 
 def test_without_spill_takes_thin_spikes_beside_another_instance_only():
-    """Spikes two pixels wide along the instance behind are spill; a stem three pixels wide
-    away from every other instance, and a mask with no neighbour, stay whole."""
+    """Spikes two pixels wide along another instance are spill, but not along one in front
+    (there the outline is the other's); a stem three pixels wide away from every other
+    instance, and a mask with no neighbour, stay whole."""
     from sr3d_cli.geometry import occlusion
 
     ids = np.zeros((90, 90), np.int32)
@@ -1105,6 +1106,7 @@ def test_without_spill_takes_thin_spikes_beside_another_instance_only():
     assert not trimmed[17:19].any()  # the row next to the body stays (the disc's tip)
     assert trimmed[61:76, 39:42].all() and trimmed[20:61, 20:61].all()
     assert (ids == 1).sum() - trimmed.sum() == 3 * 4
+    assert np.array_equal(occlusion.without_spill(ids, 1, front=ids == 2), ids == 1)
     alone = np.where(ids == 2, 0, ids)
     assert np.array_equal(occlusion.without_spill(alone, 1), alone == 1)
     thin = np.zeros_like(ids)

@@ -96,21 +96,25 @@ SPILL_REACH = 4  # px from another instance within which a mask's thin parts are
 SPILL_SHARE = 0.1  # most of a mask taken as spill; a mask that would lose more is kept whole
 
 
-def without_spill(ids: np.ndarray, k: int) -> np.ndarray:
+def without_spill(ids: np.ndarray, k: int, front: np.ndarray | None = None) -> np.ndarray:
     """Instance ``k``'s mask ``(H, W) bool`` of ``ids`` ``(H, W) int`` less its parts narrower
     than a disc of radius :data:`SPILL_WIDTH` (an opening) within :data:`SPILL_REACH` px of
-    another instance. Where a segmenter cuts between two touching objects, bits of one a few
-    pixels across stick out along the other, and the outline fit takes such bits at an
-    outline's top for its rim (extsim scene 14: 18 px of the glass bowl's instance along the
-    pitcher behind it; the bowl fitted 72 mm tall with them, 52 mm without, its object error
-    25.6 -> 7.4 mm). Elsewhere, and where the opening would take over :data:`SPILL_SHARE` of
-    the mask, the mask is left as it is (a stem, a handle's side)."""
+    another instance, except the instances in ``front`` ``(H, W) bool`` (:func:`occluders`:
+    along those its outline is theirs, and the fit lets it reach behind them). Where a
+    segmenter cuts between two touching objects, bits of one a few pixels across stick out
+    along the other, and the outline fit takes such bits at an outline's top for its rim
+    (extsim scene 14: 18 px of the glass bowl's instance along the pitcher behind it; the bowl
+    fitted 72 mm tall with them, 52 mm without, its object error 25.6 -> 7.4 mm). Elsewhere,
+    and where the opening would take over :data:`SPILL_SHARE` of the mask, the mask is left
+    as it is (a stem, a handle's side)."""
     mask = ids == k
     if not mask.any():
         return mask
     box = mask_window(mask, SPILL_REACH + 2 * SPILL_WIDTH + 1)
     own = np.ascontiguousarray(mask[box])
     others = (ids[box] > 0) & (ids[box] != k)
+    if front is not None:
+        others &= ~front[box]
     if not others.any():
         return mask
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * SPILL_WIDTH + 1,) * 2)
