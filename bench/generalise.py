@@ -41,7 +41,7 @@ from sr3d_cli.segment import Segmenter
 from common import SHARED, grasp_planners, one_core, staged, timed_repair
 
 DETECTED_IOU = 0.5  # a true object is found when an instance overlaps it this well
-GRASP_DRAWS = 4  # extsim grasps: the random draws of seed points (grasp.seed 0, 1, ...) averaged
+GRASP_DRAWS = 8  # extsim grasps: the random draws of seed points (grasp.seed 0, 1, ...) averaged
 FALSE_IOU, FALSE_AREA = 0.2, 300  # an instance this large overlapping no object this well
 INVENTED_REACH, INVENTED_CHANGE = 15, 0.01  # px from every object; metres of change
 STAGES = ("segment", "reconstruct", "align", "render", "total")
