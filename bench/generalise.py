@@ -461,7 +461,8 @@ def moved_scores(root: Path, work: Path, cfg: Config) -> dict:
         def move(frame, truth, gt, down=down, right=right):
             rgb, depth, ids, K = shifted(frame.rgb, frame.depth_m, truth, frame.camera.K,
                                          down, right)
-            return rgb, depth, ids, shifted(rgb, gt, truth, K, down, right)[1], K
+            moved_gt = shifted(frame.rgb, gt, truth, frame.camera.K, down, right)[1]
+            return rgb, depth, ids, moved_gt, K
 
         frames = write_frames(root, work / f"moved_{down}{right}_frames", move)
         out[f"{down},{right}"] = run_set(frames, work / f"moved_{down}{right}", cfg)

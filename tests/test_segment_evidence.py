@@ -1283,10 +1283,9 @@ def test_moved_frames_keep_their_truth_on_their_pixels(native_scene, tmp_path, m
     def move(frame, truth, gt):
         raw = np.where(frame.depth_m > 0, frame.depth_m + 0.0004, 0.0)  # off the 1 mm step
         rgb, depth, ids, K = shifted(frame.rgb, raw, truth, frame.camera.K, 1, 2)
-        return rgb, depth, ids, shifted(rgb, gt, truth, K, 1, 2)[1], K
+        return rgb, depth, ids, shifted(frame.rgb, gt, truth, frame.camera.K, 1, 2)[1], K
 
     out = write_frames(native_scene, tmp_path / "moved", move)
-    (source,) = discover_scenes(native_scene, IOConfig(), None)
     sources = discover_scenes(out, IOConfig(), None)
     assert len(sources) == 2
     for moved in sources:
