@@ -15,8 +15,8 @@ best K per object; where the object has a placed mesh, the best of the first 3K 
 with the friction their exact contacts on it need (the jaws closed onto its triangles, as the
 evaluator closes them on a true mesh), the worst of the grasp as planned and moved
 ``height_tolerance`` either way along the mesh's height axis (and, for a pinch across one
-wall, turned ``tilt_tolerance`` degrees against the wall's slope). An object
-where nothing holds
+wall, turned ``tilt_tolerance`` degrees against the wall's slope; for a lying vessel whose
+mouth the image leaves open or shut, on its open form as well). An object where nothing holds
 (with a placed mesh: whose best grasp's exact contacts do not hold) gets other seed points
 (``redraws``). Where still nothing holds, the object goes down a ladder until something does:
 an object given a fallback (a lying vessel's model opened at its wider end,
@@ -341,8 +341,9 @@ class Planner:
         triangles (m, 3, 3) of objects that have one; their best grasps are scored again with
         the jaws closed exactly on it (:meth:`_rescore`). ``fallbacks``: (scene, target,
         triangles) to plan an object on where nothing on its own holds (a lying vessel opened
-        at its wider end). ``axes``: a placed mesh's height axis (camera frame),
-        along which its fitted height may be off (default: the table normal). ``observed``:
+        at its wider end); its triangles also check the closed model's grasps. ``axes``: a
+        placed mesh's height axis (camera frame), along which its fitted height may be off
+        (default: the table normal). ``observed``:
         the sensor's readings where ``scene`` shows something else (:func:`observed_cloud`:
         the placed models rendered over the objects' masks); a grasp whose gripper holds
         some is contradicted by them (:meth:`_observation_agrees`). Returns (grasps, object
@@ -359,18 +360,21 @@ class Planner:
         ladder = [(p, p if p is self else p.brief()) for p in planners]
         for k in sorted(targets):
             axis = axes.get(k)
-            tries = [(targets[k], scene, surfaces.get(k))]
+            # the closed model's exact contacts are also closed on its open form, which the
+            # image leaves as likely (see _rescore); the open form itself is planned on alone
+            opened = fallbacks[k][2] if k in fallbacks else None
+            tries = [(targets[k], scene, surfaces.get(k), opened)]
             if k in fallbacks:
                 other_scene, other_target, triangles = fallbacks[k]
-                tries.append((other_target, other_scene, triangles))
+                tries.append((other_target, other_scene, triangles, None))
             # down the ladder while nothing holds: the grasps whose best needs the least
             # friction on the model (exact contacts where it was placed), the first that hold
             found, why, need, exact = GraspSet.empty(), "", np.inf, True
             for full, short in ladder:
                 planner = short if len(found) else full
-                for target, cloud, triangles in tries:
+                for target, cloud, triangles, other in tries:
                     grasps, reason, mu = planner._object(k, target, cloud, plane, triangles, axis,
-                                                         observed)
+                                                         observed, other)
                     why = why or reason
                     if triangles is None and planner.cfg.friction > self.cfg.friction:
                         mu = planner.cfg.friction  # sampled contacts held only at this one
@@ -416,10 +420,12 @@ class Planner:
 
     def _object(self, k: int, target: Cloud, scene: Cloud, plane: Plane,
                 surface: np.ndarray | None = None, axis: np.ndarray | None = None,
-                observed: Cloud | None = None) -> tuple[GraspSet, str, float]:
+                observed: Cloud | None = None, opened: np.ndarray | None = None
+                ) -> tuple[GraspSet, str, float]:
         """Grasps for object ``k``, a reason where there are none, and the friction the best
         one's exact contacts on the placed model ``surface`` need (0 without one: its
-        sampled contacts held)."""
+        sampled contacts held); with ``opened`` (the triangles (m, 3, 3) of the same model
+        open at one end), the worse of the two (:meth:`_rescore`)."""
         cfg, g = self.cfg, self.gripper
         has_normal = np.linalg.norm(target.normals, axis=1) > 0.5
         target = target.select(has_normal)
@@ -462,7 +468,7 @@ class Planner:
                 break
             # from a deeper pool: where the exact contacts fail the first ten, the next may hold
             grasps, mu = self._rescore(grasps.take(slice(0, EXACT_POOL * cfg.top_k)), k,
-                                       surface, plane, top, end, sections)
+                                       surface, plane, top, end, sections, opened)
             if mu <= cfg.friction:
                 break
         if pairs == 0:
@@ -550,8 +556,8 @@ class Planner:
                 - cfg.end_weight * at_end)
 
     def _rescore(self, grasps: GraspSet, k: int, surface: np.ndarray, plane: Plane,
-                 top: float, end: tuple[np.ndarray, float], sections: Sections
-                 ) -> tuple[GraspSet, float]:
+                 top: float, end: tuple[np.ndarray, float], sections: Sections,
+                 opened: np.ndarray | None = None) -> tuple[GraspSet, float]:
         """Score again with the friction the contacts need where the jaws, closed along the
         closing direction, first touch the placed mesh (``surface`` triangles), as the grasp
         evaluator closes them on a true mesh: the patch normals of :meth:`_try_frames` average
@@ -563,11 +569,15 @@ class Planner:
         exact height (fingertips on a flask's shoulder, a pad on a beaker's lip) fails on the
         true object. Of a pinch across one wall (jaws that do not close around the model's axis,
         through ``sections.origin``: :func:`_across_wall`), the contacts are also found with
-        the grasp turned ``tilt_tolerance`` degrees either way (:meth:`_tilts`). Best first,
-        until the best is one scored so (each costs up to three ray casts, five with the
-        turns; most objects need one to three). A contact needing more than
-        :data:`EXACT_MU_CAP` (or none) counts as that. Returns the grasps, sorted, and the
-        friction the best one's exact contacts need."""
+        the grasp turned ``tilt_tolerance`` degrees either way (:meth:`_tilts`). A model with
+        an ``opened`` form (triangles (m, 3, 3): a lying vessel whose wider end the image
+        leaves open or shut, :func:`sr3d_cli.reconstruct.unseen_mouth`) has a grasp that holds
+        on the closed one closed on the open one too, and the worse counts: jaws closing along
+        a lying cup's axis hold on its lid and need 4-9 on the rim of its true, open mouth.
+        Best first, until the best is one scored so (each costs up to three ray casts, five
+        with the turns, twice that with an open form; most objects need one to three). A
+        contact needing more than :data:`EXACT_MU_CAP` (or none) counts as that. Returns the
+        grasps, sorted, and the friction the best one's exact contacts need."""
         from sr3d_cli.grasp.quality import close_jaws
 
         tol = self.cfg.height_tolerance
@@ -582,9 +592,15 @@ class Planner:
                 break
             R, t, w = grasps.R[i], grasps.t[i], float(grasps.widths[i])
             wall = bool(_across_wall(t, w, along, sections.origin))
-            mu[i] = close_jaws(R, t, w, float(grasps.depths[i]), [k], [surface], self.gripper,
-                               shifts, enough=EXACT_MU_CAP,
-                               tilts=self._tilts(R, along) if wall else None)[2]
+            tilts = self._tilts(R, along) if wall else None
+
+            def needs(triangles: np.ndarray) -> float:
+                return close_jaws(R, t, w, float(grasps.depths[i]), [k], [triangles],
+                                  self.gripper, shifts, enough=EXACT_MU_CAP, tilts=tilts)[2]
+
+            mu[i] = needs(surface)
+            if opened is not None and mu[i] <= EXACT_MU_CAP:
+                mu[i] = max(mu[i], needs(opened))
             scores[i] = self.score(np.array([min(mu[i], EXACT_MU_CAP)]), grasps.widths[i:i + 1],
                                    grasps.R[i:i + 1], grasps.t[i:i + 1], plane, top,
                                    grasps.depths[i:i + 1], end, sections)[0]
