@@ -858,6 +858,29 @@ def test_on_a_placed_model_the_centre_term_favours_the_middle_of_a_stem():
 
 
 @pytest.mark.slow
+def _lying_vessel(outer: list):
+    """A vessel of outer profile ``outer`` [(r, z), ...] metres (base first, the last point its
+    mouth's lip) lying on the table with its axis along camera x, placed as a closed solid
+    and offered its open form (wall 2 mm, floor 4 mm): the closed model's surface points
+    (target), the scene cloud, its triangles {1: (m, 3, 3)}, the open form as a fallback
+    {1: (scene, target, triangles)} and the true scene (the open vessel)."""
+    h, widest = outer[-1][1], max(r for r, _ in outer)
+    T = make_T(np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]]),
+               np.array([-h / 2, 0, TABLE_Z - widest]))
+
+    def lying(profile):
+        mesh = revolve(np.asarray(profile), 96)
+        mesh.apply_transform(T)
+        return mesh
+
+    closed, opened = lying(outer + [(0, h)]), lying(open_vessel(outer, 0.002, 0.004))
+    target = mesh_cloud(closed, np.eye(4), 1.0, 1, 3000)
+    other = mesh_cloud(opened, np.eye(4), 1.0, 1, 3000)
+    scene = Cloud.concat([_table_cloud(), target])
+    fallback = {1: (Cloud.concat([_table_cloud(), other]), other, np.asarray(opened.triangles))}
+    return target, scene, {1: np.asarray(closed.triangles)}, fallback, _truth([opened])
+
+
 def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback():
     """A beaker 10.8 cm across lying on its side, its mouth turned away from the camera: the
     model is a closed solid (nothing seen tells an open end from a closed one), too wide for
@@ -875,23 +898,9 @@ def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback
     64 seeds and 7 approaches, which this test sets: with the default 80 and 5 the table
     normal also holds 10 of 10 here, which would hide the axis's effect."""
     r, h = 0.052, 0.09
-    outer = [(0, 0), (r, 0), (r, h - 0.003), (1.04 * r, h)]
     axis = np.array([1.0, 0, 0])
-    T = make_T(np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]]),  # its axis along camera x
-               np.array([-h / 2, 0, TABLE_Z - 1.04 * r]))
-
-    def lying(profile):
-        mesh = revolve(np.asarray(profile), 96)
-        mesh.apply_transform(T)
-        return mesh
-
-    closed, opened = lying(outer + [(0, h)]), lying(open_vessel(outer, 0.002, 0.004))
-    target = mesh_cloud(closed, np.eye(4), 1.0, 1, 3000)
-    other = mesh_cloud(opened, np.eye(4), 1.0, 1, 3000)
-    scene = Cloud.concat([_table_cloud(), target])
-    surfaces = {1: np.asarray(closed.triangles)}
-    fallback = {1: (Cloud.concat([_table_cloud(), other]), other, np.asarray(opened.triangles))}
-    truth = _truth([opened])
+    target, scene, surfaces, fallback, truth = _lying_vessel(
+        [(0, 0), (r, 0), (r, h - 0.003), (1.04 * r, h)])
     held = {"axis": [], "table normal": []}
     for seed in range(10):
         cfg = Config().grasp
@@ -931,23 +940,9 @@ def test_a_lying_cups_grasps_also_hold_on_its_open_form():
     best grasp closes along the axis for 9 and holds the true (open) cup for 7, with the
     open form checked too, 5 and 10."""
     r, h = 0.039, 0.046
-    outer = [(0, 0), (0.8 * r, 0), (r, h - 0.004), (1.06 * r, h)]
     axis = np.array([1.0, 0, 0])
-    T = make_T(np.array([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]]),  # its axis along camera x
-               np.array([-h / 2, 0, TABLE_Z - 1.06 * r]))
-
-    def lying(profile):
-        mesh = revolve(np.asarray(profile), 96)
-        mesh.apply_transform(T)
-        return mesh
-
-    closed, opened = lying(outer + [(0, h)]), lying(open_vessel(outer, 0.002, 0.004))
-    target = mesh_cloud(closed, np.eye(4), 1.0, 1, 3000)
-    other = mesh_cloud(opened, np.eye(4), 1.0, 1, 3000)
-    scene = Cloud.concat([_table_cloud(), target])
-    surfaces = {1: np.asarray(closed.triangles)}
-    fallback = {1: (Cloud.concat([_table_cloud(), other]), other, np.asarray(opened.triangles))}
-    truth = _truth([opened])
+    target, scene, surfaces, fallback, truth = _lying_vessel(
+        [(0, 0), (0.8 * r, 0), (r, h - 0.004), (1.06 * r, h)])
     held, along = {}, {}
     for name, offered in (("closed", None), ("open too", fallback)):
         held[name], along[name] = 0, 0
