@@ -22,7 +22,7 @@ from sr3d_cli.reconstruct.bowls import bowl_instead
 from sr3d_cli.reconstruct.handles import handle_slab, split_handle
 from sr3d_cli.reconstruct.lids import lid_read
 from sr3d_cli.shape.revolution_fit import (DEPTH_BAND, DEPTH_MIN_POINTS, FitOptions,
-                                           RevolutionFit, carved, fit_revolution,
+                                           RevolutionFit, carved, fit_revolution, flat_ended,
                                            off_table_readings, raw_support, smoothed,
                                            straight_walls)
 
@@ -126,14 +126,16 @@ def configured_fit(mask: np.ndarray, K: np.ndarray, plane: Plane, cfg: Reconstru
                    depth: np.ndarray | None = None, occluders: np.ndarray | None = None
                    ) -> RevolutionFit:
     """:func:`fit_revolution` with the ``reconstruct`` config's settings (the one place they
-    are passed on); ``depth`` is used when ``use_depth`` is on; ``occluders``: the pixels of
-    objects in front that may hide this one."""
+    are passed on), a lying fit then started again from flat ends (:func:`flat_ended`);
+    ``depth`` is used when ``use_depth`` is on; ``occluders``: the pixels of objects in front
+    that may hide this one."""
     options = FitOptions(levels=cfg.levels, iterations=cfg.iterations,
                          lying_margin=cfg.lying_margin, depth_vote=cfg.depth_vote,
                          axial_view=cfg.axial_view)
-    return fit_revolution(mask, K, plane, depth=depth if cfg.use_depth else None,
-                          openings=lambda fit: mouths(fit, cfg), occluders=occluders,
-                          options=options)
+    depth = depth if cfg.use_depth else None
+    fit = fit_revolution(mask, K, plane, depth=depth, openings=lambda fit: mouths(fit, cfg),
+                         occluders=occluders, options=options)
+    return flat_ended(fit, mask, K, plane, depth, occluders, options)
 
 
 def mouths(fit: RevolutionFit, cfg: ReconstructConfig) -> list[RevolutionFit]:
