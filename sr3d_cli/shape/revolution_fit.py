@@ -36,7 +36,7 @@ DEPTH_MIN_POINTS = 30  # fewest readings on a surface that count as evidence
 DEPTH_SAMPLES = 400  # readings of a mask weighed against fitted surfaces (evenly spread)
 TOP_SHARE = 0.25  # a straight top's height: where the outline is this share of its widest
 NEARER_REACH = 0.2  # share nearer than its outline says a solid whose foot is hidden may stand
-FLAT_END_START = 0.8  # share of a lying fit's length and radii its flat-ended refit starts from
+FLAT_END_START = 0.8  # share of a lying fit's length and radii its flat-ended refit starts at
 SQUARE_OUTLINE = 1.5  # below this elongation the outline's major axis is no lying solid's
 SYMMETRY_STEPS = 60  # directions tried for an outline's line of mirror symmetry (3 degrees apart)
 SYMMETRY_SAMPLES = 4000  # the outline's pixels reflected about each (evenly spread)
@@ -1317,15 +1317,15 @@ def flat_ended(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray, plane: Plane
     water glass (125 mm long, 40 mm in radius, its mouth towards the camera, 40 degrees off
     its axis) comes out 148 mm long with a 48 mm bulge near one end at IoU 0.90. The refit
     starts from the fit with every radius as wide as the widest between it and its end,
-    shortened to :data:`FLAT_END_START` about its middle: IoU 0.97 with the glass's radius
-    (40 mm), though still too long (162 mm) with narrowing ends. ``occluders``: see
-    :class:`_Frame`."""
+    scaled by :data:`FLAT_END_START` (length and radii) about its middle: IoU 0.97 with the
+    glass's radius (40 mm), though still too long (162 mm) with narrowing ends.
+    ``occluders``: see :class:`_Frame`."""
     if fit.resting != "lying":
         return fit
     radii = fit.profile[1:-1, 0] * fit.height
     half = len(radii) // 2
-    flat = np.maximum(radii, np.r_[np.maximum.accumulate(radii[:half]),
-                                   np.maximum.accumulate(radii[half:][::-1])[::-1]])
+    flat = np.r_[np.maximum.accumulate(radii[:half]),
+                 np.maximum.accumulate(radii[half:][::-1])[::-1]]
     share = FLAT_END_START
     start = _Model(fit.base + 0.5 * (1 - share) * fit.height * fit.axis, fit.axis.copy(),
                    share * fit.height, share * flat)
