@@ -857,7 +857,6 @@ def test_on_a_placed_model_the_centre_term_favours_the_middle_of_a_stem():
     assert by_height[1] > by_height[0]
 
 
-@pytest.mark.slow
 def _lying_vessel(outer: list):
     """A vessel of outer profile ``outer`` [(r, z), ...] metres (base first, the last point its
     mouth's lip) lying on the table with its axis along camera x, placed as a closed solid
@@ -881,6 +880,7 @@ def _lying_vessel(outer: list):
     return target, scene, {1: np.asarray(closed.triangles)}, fallback, _truth([opened])
 
 
+@pytest.mark.slow
 def test_a_wide_lying_vessel_closed_in_the_model_is_planned_on_its_open_fallback():
     """A beaker 10.8 cm across lying on its side, its mouth turned away from the camera: the
     model is a closed solid (nothing seen tells an open end from a closed one), too wide for
