@@ -195,14 +195,17 @@ def shifted(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, K: np.ndarray
     uint8, depth (H, W) metres, truth (H, W) ids. The segmenter reduces a 1280 px frame by
     keeping one reading in each 2x2 block: moved by a pixel, the frame keeps another of the
     four, an equally likely view of the same scene."""
-    def move(a: np.ndarray) -> np.ndarray:
-        pad = ((down, 0), (right, 0)) + ((0, 0),) * (a.ndim - 2)
-        return np.pad(a, pad, mode="edge")[:a.shape[0], :a.shape[1]]
-
     K = np.array(K, dtype=np.float64)
     K[0, 2] += right
     K[1, 2] += down
-    return move(rgb), move(depth), move(truth), K
+    return tuple(moved_image(a, down, right) for a in (rgb, depth, truth)) + (K,)
+
+
+def moved_image(a: np.ndarray, down: int, right: int) -> np.ndarray:
+    """The image ``a`` (H, W, ...) moved ``down`` and ``right`` pixels, its first rows and
+    columns repeated into the gap (:func:`shifted`)."""
+    pad = ((down, 0), (right, 0)) + ((0, 0),) * (a.ndim - 2)
+    return np.pad(a, pad, mode="edge")[:a.shape[0], :a.shape[1]]
 
 
 def shift_scores(root: Path, cfg: Config) -> dict:
@@ -461,8 +464,7 @@ def moved_scores(root: Path, work: Path, cfg: Config) -> dict:
         def move(frame, truth, gt, down=down, right=right):
             rgb, depth, ids, K = shifted(frame.rgb, frame.depth_m, truth, frame.camera.K,
                                          down, right)
-            moved_gt = shifted(frame.rgb, gt, truth, frame.camera.K, down, right)[1]
-            return rgb, depth, ids, moved_gt, K
+            return rgb, depth, ids, moved_image(gt, down, right), K
 
         frames = write_frames(root, work / f"moved_{down}{right}_frames", move)
         out[f"{down},{right}"] = run_set(frames, work / f"moved_{down}{right}", cfg)
