@@ -18,7 +18,7 @@ from sr3d_cli.geometry.camera import project, unproject
 from sr3d_cli.geometry.occlusion import occluders, opaque_objects
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, profile_from_mesh, revolve, silhouette
-from sr3d_cli.geometry.silhouette import project_mesh, surface_depth
+from sr3d_cli.geometry.silhouette import mask_iou, project_mesh, surface_depth
 from sr3d_cli.geometry.transforms import make_T, rotation_about
 from sr3d_cli.io.formats import discover_scenes
 from sr3d_cli.reconstruct import ObjectError, Reconstructor, check_border, check_mask
@@ -1035,8 +1035,7 @@ def test_an_open_vessels_rim_curled_inwards_is_widened_unless_its_outline_shows_
         for x, y in ((0.0, 0.0), (0.05, 0.03)):
             mask = fit_silhouette(_standing_fit(r, z, plane, x, y), K, (480, 640))
             fit = _standing_fit(curled, z, plane, x, y)
-            drawn = fit_silhouette(fit, K, mask.shape)
-            before = (drawn & mask).sum() / (drawn | mask).sum()
+            before = mask_iou(fit_silhouette(fit, K, mask.shape), mask)
             wide = widened_rim(fit, mask, K)
             assert wide is not fit and before < 0.86 and wide.iou > before + 0.06
             assert wide.profile[-2, 0] * h == pytest.approx(r[z <= 0.045].max())

@@ -17,6 +17,7 @@ from sr3d_cli.config import ReconstructConfig
 from sr3d_cli.geometry.camera import project
 from sr3d_cli.geometry.plane import Plane
 from sr3d_cli.geometry.revolution import open_vessel, revolve
+from sr3d_cli.geometry.silhouette import mask_iou
 from sr3d_cli.geometry.transforms import apply_T, place_points
 from sr3d_cli.reconstruct.bowls import bowl_instead
 from sr3d_cli.reconstruct.handles import handle_slab, split_handle
@@ -204,9 +205,8 @@ def widened_rim(fit: RevolutionFit, mask: np.ndarray, K: np.ndarray) -> Revoluti
     profile = fit.profile.copy()
     profile[2 + widest:-1, 0] = r[widest]
     wide = replace(fit, profile=profile)
-    drawn, widened = (fit_silhouette(f, K, mask.shape) for f in (fit, wide))
-    iou = [(d & mask).sum() / max((d | mask).sum(), 1) for d in (drawn, widened)]
-    return replace(wide, iou=float(iou[1])) if iou[1] >= iou[0] - RIM_LOSS else fit
+    drawn, widened = (mask_iou(fit_silhouette(f, K, mask.shape), mask) for f in (fit, wide))
+    return replace(wide, iou=widened) if widened >= drawn - RIM_LOSS else fit
 
 
 def unseen_mouth(fit: RevolutionFit, cfg: ReconstructConfig) -> trimesh.Trimesh | None:
