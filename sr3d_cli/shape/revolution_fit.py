@@ -862,10 +862,10 @@ def foot_at_readings(fit: RevolutionFit, each: np.ndarray, first: int,
     readings below its stem: ``each (n,)`` the readings found at each level off the stem,
     ``first`` the stem's lowest level, ``stem`` its radius (share of the height). The carve
     pools readings over :data:`CARVE_WINDOW` levels, so a foot's own readings keep up to two
-    levels above it wide: a wine glass's 3 mm foot was fitted 17-21 mm tall, and the stem's
-    lower part drawn 15-20 mm nearer than it is. The sensor's noise spreads the readings of
-    the foot's top evenly about it, so their median level is that top; the levels above it
-    take the stem's radius. Returns ``fit`` itself where no level changes."""
+    levels above it wide: left so, extsim's wine glass (a 3 mm foot) has a foot 17-21 mm tall,
+    and the stem's lower part is drawn 15-20 mm nearer than it is. The sensor's noise spreads
+    the readings of the foot's top evenly about it, so their median level is that top; the
+    levels above it take the stem's radius. Returns ``fit`` itself where no level changes."""
     below = each[:first]
     if first < 2 or below.sum() == 0:
         return fit
@@ -873,7 +873,7 @@ def foot_at_readings(fit: RevolutionFit, each: np.ndarray, first: int,
     top = int(np.searchsorted(cum, cum[-1] / 2.0))
     if top + 1 >= first:
         return fit
-    profile = fit.profile.copy()
+    profile = fit.profile.copy()  # row i + 1 holds level i: levels top + 1 .. first - 1
     profile[2 + top:1 + first, 0] = np.minimum(profile[2 + top:1 + first, 0], stem)
     return replace(fit, profile=profile)
 
