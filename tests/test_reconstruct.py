@@ -601,27 +601,57 @@ def test_a_glass_bowl_is_told_from_a_dome_and_its_height_set_by_its_readings(mon
     assert right() <= 2
 
 
-@pytest.mark.parametrize("elevation", [64.0, 68.0, 72.0])
-def test_a_carved_goblets_foot_ends_at_its_readings_median_level(elevation, monkeypatch):
-    """The carve pools the readings over CARVE_WINDOW levels (3.7 mm each here), so the
-    foot's own readings (its top 4 mm up, 4 mm of noise) keep the levels above it wide.
-    Measured: with the foot ended at the median level of its readings, only its lowest level
-    is wider than 12 mm (25-33 mm: the foot kept); left as carved, the foot is 11-16 mm
-    tall."""
+@pytest.mark.parametrize("foot, elevation", [(0.004, 64.0), (0.004, 72.0), (0.012, 64.0),
+                                             (0.012, 68.0)])
+def test_a_carved_goblets_foot_ends_at_its_readings_median_level(foot, elevation, monkeypatch):
+    """:data:`GOBLET` with a foot 4 or 12 mm thick, seen steeply from above: the carve pools
+    the readings over CARVE_WINDOW levels (3.8 mm each here), so the foot's own readings (4 mm
+    of noise) keep the levels above it wide. Measured: with the foot ended at the median level
+    of its readings above the lowest level (the table's, seen through it), its top is 3.8-7.6
+    mm up for the thin foot and 11.3-11.6 mm for the thick one; left as carved, 15-16 and
+    22-23 mm; taking the lowest level's readings too, the thick foot ends at 0 mm."""
     from sr3d_cli.shape import revolution_fit
 
-    plane, mask, depth = _goblet_from_above(elevation)
+    goblet = GOBLET.copy()
+    goblet[2, 1], goblet[3, 1] = foot, foot + 0.002
+    plane, mask, depth, _, _ = _frame_from_above(goblet, elevation, 0.0, 0.02,
+                                                 surface=open_vessel(goblet[:-1], 0.002, 0.088),
+                                                 noise=0.004)
     fit = fit_revolution(mask, K, plane, depth=depth)
 
-    def foot() -> tuple[float, float]:
+    def top() -> float:
         out = carved(fit, mask, depth, K)
         r, z = out.profile[1:-1, 0] * out.height, out.profile[1:-1, 1] * out.height
-        return float(z[(r > 0.012) & (z < 0.06)].max()), float(r[0])
+        assert r[0] > 0.02  # the foot itself is kept
+        return float(z[(r > 0.012) & (z < 0.06)].max())
 
-    top, radius = foot()
-    assert top < 0.002 and radius > 0.02
+    assert abs(top() - foot) <= 0.004  # within one level
     monkeypatch.setattr(revolution_fit, "foot_at_readings", lambda fit, *args: fit)
-    assert foot()[0] > 0.01
+    assert top() > foot + 0.01
+
+
+def test_a_foot_ends_at_its_readings_but_a_body_under_a_carved_run_stays():
+    """foot_at_readings on 40 levels: a foot under a stem from level 5 whose readings above
+    the lowest level centre on level 2 keeps levels 0-2 and takes the stem's radius above; the
+    same readings under a run from level 18 (45% of the height: a flat bottle carved above its
+    shoulder) change nothing, nor do readings on the lowest level alone."""
+    from sr3d_cli.shape.revolution_fit import FOOT_SPAN, foot_at_readings
+
+    n = 40
+    z = np.linspace(0, 1, n)
+    radii = np.full(n, 0.2)
+    profile = np.vstack([[0.0, 0.0], np.column_stack([radii, z]), [0.0, 1.0]])
+    fit = RevolutionFit(profile, np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.1, "standing", 0.9)
+    each = np.zeros(n, np.int64)
+    each[:4] = [90, 10, 40, 10]  # the table through the foot, then the foot's top about level 2
+    out = foot_at_readings(fit, each, 5, 0.02)
+    r = out.profile[1:-1, 0]
+    assert (r[:3] == 0.2).all() and (r[3:5] == 0.02).all() and (r[5:] == 0.2).all()
+    assert z[18] > FOOT_SPAN
+    assert foot_at_readings(fit, each, 18, 0.02) is fit
+    table_only = np.zeros(n, np.int64)
+    table_only[0] = 90
+    assert foot_at_readings(fit, table_only, 5, 0.02) is fit
 
 
 def test_a_carved_bowl_narrows_into_its_stem_below_the_readings_that_find_it():

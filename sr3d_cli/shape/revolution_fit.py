@@ -758,6 +758,8 @@ STEM_SHARE = 0.12  # radius of a carved level, as a share of the widest
 BOWL_READINGS = 5  # fewest readings at a level that find the bowl there (carved)
 STEM_SPAN = (0.15, 0.75)  # a carved run spans at least the first share of the height and ends
 # below the second (a stem holds up a bowl)
+FOOT_SPAN = 0.25  # share of the height under a carved run beyond which what stands there is a
+# body, not a foot (a flat bottle carved above its shoulder), and is left as fitted
 
 
 def carved(fit: RevolutionFit, mask: np.ndarray, depth: np.ndarray, K: np.ndarray,
@@ -865,12 +867,15 @@ def foot_at_readings(fit: RevolutionFit, each: np.ndarray, first: int,
     levels above it wide: left so, extsim's wine glass (a 3 mm foot) has a foot 17-21 mm tall,
     and the stem's lower part is drawn 15-20 mm nearer than it is. The sensor's noise spreads
     the readings of the foot's top evenly about it, so their median level is that top; the
-    levels above it take the stem's radius. Returns ``fit`` itself where no level changes."""
-    below = each[:first]
-    if first < 2 or below.sum() == 0:
+    levels above it take the stem's radius. The lowest level's readings are left out: they
+    are the table seen through the foot, and with them a foot 12 mm thick ends at the table.
+    Returns ``fit`` itself where no level changes, or where the levels under the stem span
+    more than :data:`FOOT_SPAN` of the height."""
+    below = each[1:first]  # the lowest level's are the table's, seen through the foot
+    if first < 3 or below.sum() == 0 or fit.profile[1 + first, 1] > FOOT_SPAN:
         return fit
     cum = np.cumsum(below)
-    top = int(np.searchsorted(cum, cum[-1] / 2.0))
+    top = 1 + int(np.searchsorted(cum, cum[-1] / 2.0))
     if top + 1 >= first:
         return fit
     profile = fit.profile.copy()  # row i + 1 holds level i: levels top + 1 .. first - 1
