@@ -13,7 +13,8 @@
   image's border cuts an object (border_cut); the whole pipeline also runs on the frames moved
   by one pixel (moved).
 - ``extsim``: ../shared/extsim (an independent renderer, scanned household meshes), the same
-  pipeline plus the pose error and grasps judged on the true meshes.
+  pipeline plus the pose error and grasps judged on the true meshes, and the whole pipeline on
+  the frames resampled to a narrower stream of the same field of view (narrower).
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ PAIR_BAND = 15  # px at 1280 wide around the object copied with it (its holes, i
 SHIFTS = ((0, 1), (1, 0), (1, 1))  # (down, right) px: the frame moved by a pixel (shifted)
 MOVES = ((0, 1), (1, 0))  # (down, right) px: the moves the whole pipeline is run on (moved)
 VGA = (640, 480)  # (width, height) px: the size the real frames are also resampled to (resampled)
+NARROW_WIDTH = 640  # px: the width extsim's 848 px frames are also resampled to (narrower)
 BORDER_SHARE = 0.25  # share of an object's height (foot) or width (side) a border-cut crop drops
 BORDER_SIDES = ("foot", "side")  # where border_cut cuts: an object's foot or its left side
 STORED_STEP = 0.001  # m: the step of a RealSense's 16-bit depth at its default scale (millimetres)
@@ -223,25 +225,36 @@ def shift_scores(root: Path, cfg: Config) -> dict:
 def resampled(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, K: np.ndarray,
               size: tuple[int, int] = VGA
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The frame's central crop of the aspect of ``size`` (width, height) resampled to it: the
-    colour averaged over each new pixel's area, the depth and the ids taken from the nearest
+    """The frame's central crop of the aspect of ``size`` (width, height; at most the frame's
+    whole width) resampled to it: the colour averaged over each new pixel's area, the depth and the ids taken from the nearest
     pixel (a reading is never blended across an object's edge), K (3, 3) cropped and scaled
     with them, pixel centres kept. rgb (H, W, 3) uint8, depth (H, W) metres, truth (H, W) ids.
     A 1280x720 frame's segmenter works on a 640x360 half; a 640x480 frame is worked on whole,
     at 1.33 times the scale."""
     w, h = size
     height, width = truth.shape
-    crop = int(round(height * w / h))
+    crop = min(int(round(height * w / h)), width)
     x0 = (width - crop) // 2
-    scale = w / crop
+    scale = np.array([w / crop, h / height])
     K = np.array(K, dtype=np.float64)
     K[0, 2] -= x0
-    K[:2] *= scale
+    K[:2] *= scale[:, None]
     K[:2, 2] += 0.5 * scale - 0.5
     return (cv2.resize(rgb[:, x0:x0 + crop], size, interpolation=cv2.INTER_AREA),
             cv2.resize(depth[:, x0:x0 + crop], size, interpolation=cv2.INTER_NEAREST),
             cv2.resize(truth[:, x0:x0 + crop].astype(np.uint16), size,
                        interpolation=cv2.INTER_NEAREST).astype(np.int32), K)
+
+
+def narrower(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, K: np.ndarray,
+             width: int = NARROW_WIDTH
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The whole frame resampled to ``width`` px across, its aspect kept (:func:`resampled`):
+    the view of a camera with the same field of view streaming fewer pixels, every object
+    ``width / W`` times as many pixels across. rgb (H, W, 3) uint8, depth (H, W) metres, truth
+    (H, W) ids, K (3, 3); returns them resampled, K with them."""
+    height, full = truth.shape
+    return resampled(rgb, depth, truth, K, (width, int(round(height * width / full))))
 
 
 def toned(rgb: np.ndarray, tone: str) -> np.ndarray:
@@ -471,6 +484,23 @@ def moved_scores(root: Path, work: Path, cfg: Config) -> dict:
     return out
 
 
+def narrower_scores(root: Path, work: Path, cfg: Config) -> dict:
+    """:func:`run_set` on the frames below ``root`` resampled by :func:`narrower` (the true
+    depth with them, each pixel from the nearest), with ``scale``: the new width over the
+    frames' own (the widest, where they differ)."""
+    widths = []
+
+    def narrow(frame, truth, gt):
+        widths.append(truth.shape[1])
+        rgb, depth, ids, K = narrower(frame.rgb, frame.depth_m, truth, frame.camera.K)
+        return rgb, depth, ids, cv2.resize(gt, ids.shape[::-1],
+                                           interpolation=cv2.INTER_NEAREST), K
+
+    frames = write_frames(root, work / "narrower_frames", narrow)
+    out = run_set(frames, work / "narrower", cfg)
+    return {**out, "scale": NARROW_WIDTH / max(widths)} if widths else out
+
+
 def realdata_section(work: Path, cfg: Config) -> dict:
     root = SHARED / "realdata"
     if not root.is_dir():
@@ -496,6 +526,7 @@ def extsim_section(work: Path, cfg: Config) -> dict:
     out["shifted"] = shift_scores(root, cfg)
     out["toned"] = tone_scores(root, cfg)
     out["moved"] = moved_scores(root, work / "extsim_moved", cfg)
+    out["narrower"] = narrower_scores(root, work / "extsim_narrower", cfg)
     return out
 
 
@@ -584,6 +615,16 @@ def report(results: dict) -> list[str]:
                     f"{1000 * m['depth']['sr3d']['mae']:.1f} / "
                     f"{1000 * m['median_mae']['sr3d']:.1f} mm (mean / median)"
                     for key, m in r["moved"].items()))
+        if r.get("narrower"):
+            n = r["narrower"]
+            lines.append(
+                f"- the whole pipeline on the same frames resampled to {NARROW_WIDTH} px across "
+                f"(a camera of the same field of view streaming fewer pixels: each object "
+                f"{n['scale']:.2f} times as many pixels across): detected "
+                f"{n['detection']:.2f}, mean best IoU {n['mean_iou']:.3f}, false instances per "
+                f"frame {n['false_per_frame']:.2f}, object MAE "
+                f"{1000 * n['depth']['sr3d']['mae']:.1f} / {1000 * n['median_mae']['sr3d']:.1f} "
+                f"mm (mean / median)")
         if r.get("border_cut"):
             lines.append(
                 f"- cut by the image border (simulated: each frame cropped so that the border "
