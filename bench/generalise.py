@@ -225,20 +225,20 @@ def shift_scores(root: Path, cfg: Config) -> dict:
 def resampled(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, K: np.ndarray,
               size: tuple[int, int] = VGA
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The frame's central crop of the aspect of ``size`` (width, height; at most the frame's
-    whole width) resampled to it: the colour averaged over each new pixel's area, the depth and the ids taken from the nearest
+    """The frame's central crop of the aspect of ``size`` (width, height) resampled to it: the
+    colour averaged over each new pixel's area, the depth and the ids taken from the nearest
     pixel (a reading is never blended across an object's edge), K (3, 3) cropped and scaled
     with them, pixel centres kept. rgb (H, W, 3) uint8, depth (H, W) metres, truth (H, W) ids.
     A 1280x720 frame's segmenter works on a 640x360 half; a 640x480 frame is worked on whole,
     at 1.33 times the scale."""
     w, h = size
     height, width = truth.shape
-    crop = min(int(round(height * w / h)), width)
+    crop = int(round(height * w / h))
     x0 = (width - crop) // 2
-    scale = np.array([w / crop, h / height])
+    scale = w / crop
     K = np.array(K, dtype=np.float64)
     K[0, 2] -= x0
-    K[:2] *= scale[:, None]
+    K[:2] *= scale
     K[:2, 2] += 0.5 * scale - 0.5
     return (cv2.resize(rgb[:, x0:x0 + crop], size, interpolation=cv2.INTER_AREA),
             cv2.resize(depth[:, x0:x0 + crop], size, interpolation=cv2.INTER_NEAREST),
@@ -246,15 +246,22 @@ def resampled(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, K: np.ndarr
                        interpolation=cv2.INTER_NEAREST).astype(np.int32), K)
 
 
-def narrower(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, K: np.ndarray,
+def narrower(rgb: np.ndarray, depth: np.ndarray, truth: np.ndarray, camera,
              width: int = NARROW_WIDTH
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The whole frame resampled to ``width`` px across, its aspect kept (:func:`resampled`):
-    the view of a camera with the same field of view streaming fewer pixels, every object
-    ``width / W`` times as many pixels across. rgb (H, W, 3) uint8, depth (H, W) metres, truth
-    (H, W) ids, K (3, 3); returns them resampled, K with them."""
+    """The whole frame resampled to ``width`` px across, its aspect kept: the view of a camera
+    with the same field of view streaming fewer pixels, every object ``width / W`` times as many
+    pixels across. The colour averaged over each new pixel's area, the depth and the ids taken
+    from the nearest pixel (as :func:`resampled`). rgb (H, W, 3) uint8, depth (H, W) metres,
+    truth (H, W) ids, ``camera``: the frame's :class:`~sr3d_cli.geometry.camera.Camera`;
+    returns them resampled, with K (3, 3) for the new size."""
     height, full = truth.shape
-    return resampled(rgb, depth, truth, K, (width, int(round(height * width / full))))
+    size = (width, int(round(height * width / full)))
+    return (cv2.resize(rgb, size, interpolation=cv2.INTER_AREA),
+            cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST),
+            cv2.resize(truth.astype(np.uint16), size,
+                       interpolation=cv2.INTER_NEAREST).astype(np.int32),
+            camera.scaled(*size).K)
 
 
 def toned(rgb: np.ndarray, tone: str) -> np.ndarray:
@@ -492,7 +499,7 @@ def narrower_scores(root: Path, work: Path, cfg: Config) -> dict:
 
     def narrow(frame, truth, gt):
         widths.append(truth.shape[1])
-        rgb, depth, ids, K = narrower(frame.rgb, frame.depth_m, truth, frame.camera.K)
+        rgb, depth, ids, K = narrower(frame.rgb, frame.depth_m, truth, frame.camera)
         return rgb, depth, ids, cv2.resize(gt, ids.shape[::-1],
                                            interpolation=cv2.INTER_NEAREST), K
 
