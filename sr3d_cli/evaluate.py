@@ -16,6 +16,7 @@ import numpy as np
 
 from sr3d_cli.errors import InputError
 from sr3d_cli.geometry.silhouette import mask_iou
+from sr3d_cli.io.images import read_rgb
 
 METRICS = ("rmse", "rel", "mae", "delta_1.05", "delta_1.10", "delta_1.25")
 DELTAS = {"delta_1.05": 1.05, "delta_1.10": 1.10, "delta_1.25": 1.25}
@@ -213,6 +214,15 @@ def evaluation_mask(source, frame_id: str, shape: tuple[int, int], which: str
                      "gt/masks/ and masks/)")
 
 
+def _colour_shape(source, frame_id: str) -> tuple[int, int] | None:
+    """(H, W) of the frame's colour image, where it is there and readable (the size every
+    file of the frame must have); else None (the ground truth then sets it)."""
+    try:
+        return read_rgb(source.rgb_path(frame_id)).shape[:2]
+    except InputError:
+        return None
+
+
 def evaluate_frame(source, frame_id: str, preds: list[str], *, holes: str = "full",
                    mask_source: str = "auto", protocol: Protocol | None = None,
                    resolution: tuple[int, int] | None = None) -> dict:
@@ -226,7 +236,7 @@ def evaluate_frame(source, frame_id: str, preds: list[str], *, holes: str = "ful
     gt_path = source.gt_depth_path(frame_id)
     if gt_path is None:
         raise InputError(source.frame_key(frame_id), "no ground-truth depth (gt/depth/)")
-    gt = source.read_depth_checked(gt_path)
+    gt = source.read_depth_checked(gt_path, _colour_shape(source, frame_id))
     mask, mask_from = evaluation_mask(source, frame_id, gt.shape, mask_source)
     result = {"mask": mask_from, "preds": {}, "arrays": {"gt": gt, "mask": mask}}
     for pred in preds:

@@ -144,6 +144,7 @@ def frame_plane(frame: Frame, ids: np.ndarray, plane_cfg) -> tuple[Plane | None,
         return None, str(exc)
 
 
+MESH_SUFFIXES = (".ply", ".obj", ".stl")  # the mesh files a stage output may hold
 OPEN_SUFFIX = "_open.ply"  # meshes/<frame>/<k>_open.ply: the object opened at a likely mouth
 
 
@@ -154,7 +155,7 @@ def mesh_path(source: SceneSource, frame_id: str, obj_id: int, suffix: str = ".p
 def find_mesh(source: SceneSource, frame_id: str, obj_id: int):
     """The mesh of an object: under the output root, else under the input root (else the
     output path, which does not exist)."""
-    hit = source.stage_file(f"meshes/{frame_id}", str(obj_id), (".ply", ".obj", ".stl"))
+    hit = source.stage_file(f"meshes/{frame_id}", str(obj_id), MESH_SUFFIXES)
     return hit if hit is not None else mesh_path(source, frame_id, obj_id)
 
 
@@ -337,13 +338,40 @@ def record_path(source: SceneSource, frame_id: str, stage: str):
 
 
 def stale(cfg, source: SceneSource, frame_id: str, stage: str) -> str | None:
-    """Why a stage's output of this frame must be made again: :data:`MISSING`, the first
-    difference from its record, or None (current, or made elsewhere without a record)."""
+    """Why a stage's output of this frame must be made again: :data:`MISSING`, its files
+    unreadable (:func:`broken`), the first difference from its record, or None (current, or
+    made elsewhere without a record)."""
     path = record_path(source, frame_id, stage)
     if path is None:
         return MISSING
+    why = broken(path, stage)
+    if why is not None:
+        return why
     return provenance.stale_reason(provenance.read_record(path),
                                    stage_record(cfg, source, frame_id, stage))
+
+
+def broken(path: Path, stage: str) -> str | None:
+    """Why the output of ``stage`` whose JSON is ``path`` cannot be used (None: it can): the
+    JSON cut off or not JSON, or a file it stands for empty or gone (the masks' PNG beside it;
+    the meshes it lists). A run stopped hard or a disk that filled up leaves such files; they
+    are made again rather than failing the frame."""
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return f"{path.name} cannot be read"
+    if not isinstance(document, dict):
+        return f"{path.name} holds no mapping"
+    data = []  # each file that must be there, as the ways it may be written
+    if stage == "segment":
+        data = [[path.with_suffix(".png")]]
+    elif stage == "reconstruct" and isinstance(document.get("objects"), dict):
+        data = [[path.parent / path.stem / f"{k}{suffix}" for suffix in MESH_SUFFIXES]
+                for k in document["objects"]]
+    for ways in data:
+        if not any(file.is_file() and file.stat().st_size > 0 for file in ways):
+            return f"{ways[0].parent.name}/{ways[0].name} is missing or empty"
+    return None
 
 
 def reconstruct_frame(state: FrameState, reconstructor, record: dict | None = None

@@ -47,6 +47,16 @@ def test_values_beyond_uint16_become_holes_not_wrapped():
     np.testing.assert_array_equal(units, [[0, 1000]])
 
 
+def test_the_largest_uint16_value_is_no_reading(tmp_path):
+    """Some cameras and exporters mark a missing reading 65535: 65.5 m in millimetres, beyond
+    any depth camera's range, so it is read as none (0), and a 16-bit value under it as is."""
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "d.png"), np.array([[65535, 65534, 1200, 0]], np.uint16))
+    np.testing.assert_allclose(images.read_depth(tmp_path / "d.png", 0.001),
+                               [[0.0, 65.534, 1.2, 0.0]], rtol=1e-6)
+
+
 @pytest.mark.parametrize("content, problem", [
     (b"", "file is empty"),
     (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00", "cannot decode image"),
@@ -126,6 +136,12 @@ CAMERA_FILES = {
 }
 
 
+def test_a_camera_file_with_a_byte_order_mark_is_read(tmp_path):
+    path = tmp_path / "camera.json"
+    path.write_bytes(b"\xef\xbb\xbf" + CAMERA_FILES["realsense.json"].encode())
+    np.testing.assert_allclose(load_camera(path).K, K)
+
+
 @pytest.mark.parametrize("name", sorted(CAMERA_FILES))
 def test_every_camera_format_gives_the_same_intrinsics(tmp_path, name):
     cam = load_camera(_write(tmp_path / name, CAMERA_FILES[name]), depth_scale=0.00025)
@@ -169,6 +185,10 @@ def test_rescaled_images_rescale_K_with_notice_and_other_sizes_fail():
     ('{"fx": 1, "fy": 1, "ppx": 1, "width": 4, "height": 4}', "lacks 'ppy'"),
     ("{not json", "cannot parse camera file"),
     ('{"K": [[0, 0, 1], [0, 1, 1], [0, 0, 1]], "width": 4, "height": 4}', "focal lengths"),
+    ('{"K": [[615.5, 0, 0], [0, 614.75, 0], [321.25, 238.5, 1]], "width": 640, "height": 480}',
+     r"last row \[321.25, 238.5, 1.0\] \(transposed\? give K's rows"),
+    ('{"K": [[615.5, 0, 321.25], [0, 614.75, 238.5], [0, 0, 2]], "width": 640, "height": 480}',
+     r"got last row \[0.0, 0.0, 2.0\]\)"),
 ])
 def test_bad_camera_files(tmp_path, text, problem):
     with pytest.raises(InputError, match=problem):
@@ -198,3 +218,17 @@ def test_discover_scenes_below_a_root_and_output_mapping(native_scene, tmp_path)
     empty.mkdir()
     with pytest.raises(InputError, match="empty: no scene folder found"):
         discover_scenes(empty, IOConfig())
+
+
+def test_upper_case_suffixes_are_read_and_two_files_of_one_frame_named(native_scene, caplog):
+    (native_scene / "rgb/000001.png").rename(native_scene / "rgb/000001.PNG")
+    (native_scene / "depth/000001.png").rename(native_scene / "depth/000001.PNG")
+    np.save(native_scene / "depth/000000.npy", np.full((24, 32), 0.7, np.float32))
+    scene = discover_scenes(native_scene, IOConfig())[0]
+    assert scene.frame_ids() == ["000000", "000001"]
+    frame = scene.load_frame("000001")
+    assert frame.rgb.shape == (24, 32, 3) and frame.depth_m[0, 0] == pytest.approx(0.5)
+    with caplog.at_level("WARNING"):
+        frame = scene.load_frame("000000")
+    assert frame.depth_m[0, 0] == pytest.approx(0.5)  # the PNG, the first kind, is read
+    assert "000000.png and 000000.npy are the same frame; reading 000000.png" in caplog.text

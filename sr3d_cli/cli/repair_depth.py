@@ -57,6 +57,16 @@ def repair_depth(scene, npy, ply, preview, masks, redo, batch, out, frames, fmt)
         _ = pipeline.segmenter, pipeline.reconstructor
     except InputError as exc:
         raise UsageExit(str(exc)) from None
+    if batch.get("workers", 1) <= 1 and cfg.render.backend != "numpy":
+        # pyrender's first import, were it left to the first frame, can swallow a Ctrl-C (one
+        # of its window libraries imports inside a bare ``except:``); forked workers import
+        # it themselves, as each makes its own GL context
+        from sr3d_cli.render import import_pyrender
+
+        try:
+            import_pyrender()
+        except Exception:  # noqa: BLE001 - no GL library: the numpy fallback says so later
+            pass
 
     def work(frame):
         source, fid = frame.scene, frame.frame_id

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import logging
 import json
+import logging
 import time
 import traceback
 import zlib
@@ -144,16 +144,19 @@ def in_shard(key: str, shard: tuple[int, int] | None) -> bool:
 def _finished(source: SceneSource, frame_id: str, paths: list[Path],
               stale: Callable[[SceneSource, str], str | None] | None, keep_stale: bool
               ) -> str | None:
-    """Why ``--skip-existing`` may leave a frame (None: it must run): its outputs exist, did not
-    record a failed frame, and are current (or stale and ``keep_stale``)."""
-    if not all(p.is_file() for p in paths):
+    """Why ``--skip-existing`` may leave a frame (None: it must run): its outputs exist, are not
+    empty (a JSON one readable), did not record a failed frame, and are current (or stale and
+    ``keep_stale``)."""
+    if not all(p.is_file() and p.stat().st_size > 0 for p in paths):
         return None
     for p in paths:
         if p.suffix == ".json":
             try:
-                if "frame_failed" in p.read_text(encoding="utf-8"):
-                    return None
-            except OSError:
+                text = p.read_text(encoding="utf-8")
+                json.loads(text)
+            except (OSError, ValueError):
+                return None
+            if "frame_failed" in text:
                 return None
     why = stale(source, frame_id) if stale is not None else None
     if why is None:

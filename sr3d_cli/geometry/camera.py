@@ -31,6 +31,13 @@ class Camera:
             raise ValueError("K must hold finite numbers")
         if not (K[0, 0] > 0 and K[1, 1] > 0):
             raise ValueError("focal lengths must be positive")
+        if not (np.allclose(K[2], [0.0, 0.0, 1.0]) and K[1, 0] == 0):
+            # a pinhole's K is [[fx, s, cx], [0, fy, cy], [0, 0, 1]]; a K written column by
+            # column (transposed) has (cx, cy, 1) as its last row
+            raise ValueError(f"K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] row by row, "
+                             f"got last row {K[2].tolist()}" + (
+                                 " (transposed? give K's rows, not its columns)"
+                                 if np.allclose(K[:, 2], [0.0, 0.0, 1.0]) else ""))
         if self.width < 0 or self.height < 0:
             raise ValueError("image size must not be negative")
         if not (self.depth_scale > 0 and np.isfinite(self.depth_scale)):

@@ -122,7 +122,7 @@ def load_camera(path: str | Path, depth_scale: float = 0.001,
         if suffix == ".npy":
             return _matrix_only(np.load(path, allow_pickle=False).astype(np.float64), path,
                                 depth_scale)
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark some editors write
         if suffix == ".txt":
             numbers = [float(x) for x in re.split(r"[\s,;\[\]]+", text) if x]
             return _matrix_only(np.asarray(numbers, dtype=np.float64).reshape(-1, 3), path,
@@ -141,7 +141,7 @@ def load_camera(path: str | Path, depth_scale: float = 0.001,
     except KeyError as exc:
         raise InputError(path, f"camera file lacks {exc}") from None
     except (TypeError, ValueError, OverflowError) as exc:
-        raise InputError(path, f"incomplete camera file ({type(exc).__name__}: {exc})") from None
+        raise InputError(path, f"invalid camera file ({type(exc).__name__}: {exc})") from None
     if "xres" in data:
         precise = _cleargrasp_parameters(path)
         if precise:

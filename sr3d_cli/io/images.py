@@ -64,8 +64,10 @@ def clean_depth(depth: np.ndarray) -> np.ndarray:
 def read_depth(path: str | Path, depth_scale: float) -> np.ndarray:
     """Depth file to ``(H, W) float32`` metres, 0 = no reading.
 
-    Integer images (PNG, TIFF, integer ``.npy``) are multiplied by ``depth_scale``; float files
-    are taken as metres.
+    Integer images (PNG, TIFF, integer ``.npy``) are multiplied by ``depth_scale``, their
+    largest value (65535 in 16 bits) read as no reading: some cameras and exporters mark a
+    missing reading so, and at any depth camera's scale it lies beyond its range (65.5 m in
+    millimetres). Float files are taken as metres.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -92,7 +94,9 @@ def read_depth(path: str | Path, depth_scale: float) -> np.ndarray:
     if raw.dtype.kind in "ui":
         if raw.dtype == np.uint8:
             raise InputError(path, "depth is 8-bit; expected uint16 (or float metres)")
-        return clean_depth(raw.astype(np.float64) * depth_scale)
+        depth = raw.astype(np.float64) * depth_scale
+        depth[raw == np.iinfo(raw.dtype).max] = 0.0
+        return clean_depth(depth)
     raise InputError(path, f"depth has unsupported dtype {raw.dtype}")
 
 

@@ -85,20 +85,37 @@ class SceneSource:
                       if p.is_file() and p.suffix.lower() in images.DEPTH_SUFFIXES
                       and not p.name.startswith(".") and p.stem not in known)
 
-    def _find(self, folder: Path, frame_id: str, suffixes) -> Path | None:
+    @staticmethod
+    def _found(folder: Path, frame_id: str, suffixes) -> list[Path]:
+        """The files ``folder/<frame_id><suffix>`` that exist, in the order of ``suffixes``,
+        each suffix in lower or upper case (frames are listed whatever its case)."""
+        out = []
         for suffix in suffixes:
-            p = folder / f"{frame_id}{suffix}"
-            if p.is_file():
-                return p
-        return None
+            for case in dict.fromkeys((suffix, suffix.upper())):
+                p = folder / f"{frame_id}{case}"
+                if p.is_file():
+                    out.append(p)
+                    break
+        return out
+
+    def _find(self, folder: Path, frame_id: str, suffixes) -> Path | None:
+        found = self._found(folder, frame_id, suffixes)
+        return found[0] if found else None
+
+    def _input(self, folder: Path, frame_id: str, suffixes) -> Path:
+        """A frame's input file under ``folder``; a notice names the others where several
+        kinds exist (``000001.png`` and ``000001.npy``), as only the first is read."""
+        found = self._found(folder, frame_id, suffixes)
+        if len(found) > 1:
+            self._notice(f"{folder}: {' and '.join(p.name for p in found)} are the same "
+                         f"frame; reading {found[0].name}")
+        return found[0] if found else folder / f"{frame_id}.png"
 
     def rgb_path(self, frame_id: str) -> Path:
-        return self._find(self.root / "rgb", frame_id, images.RGB_SUFFIXES) or \
-            self.root / "rgb" / f"{frame_id}.png"
+        return self._input(self.root / "rgb", frame_id, images.RGB_SUFFIXES)
 
     def depth_path(self, frame_id: str) -> Path:
-        return self._find(self.root / "depth", frame_id, images.DEPTH_SUFFIXES) or \
-            self.root / "depth" / f"{frame_id}.png"
+        return self._input(self.root / "depth", frame_id, images.DEPTH_SUFFIXES)
 
     def gt_depth_path(self, frame_id: str) -> Path | None:
         return self._find(self.root / "gt" / "depth", frame_id, images.DEPTH_SUFFIXES)

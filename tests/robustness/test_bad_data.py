@@ -107,6 +107,11 @@ def test_sizes_that_disagree_and_missing_files(tmp_path):
     assert "depth/000000.png: depth is 10x10 but the colour image is 32x24" in result.output
     assert "000002: no prediction 'depth'" in result.output
     assert "1 frames done, 2 failed" in result.output
+    # the ground truth of another size is named, not the mask that agrees with the frame
+    write_png(scene / "gt" / "depth" / "000001.png", np.full((12, 16), 500, np.uint16))
+    result = _run(["evaluate", str(scene), "--pred", "depth", "--frames", "000001"])
+    assert result.exit_code == 1
+    assert "gt/depth/000001.png: depth is 16x12 but the colour image is 32x24" in result.output
 
 
 def test_unreadable_config_is_a_usage_error_naming_the_file(tmp_path):

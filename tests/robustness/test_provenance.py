@@ -111,6 +111,39 @@ def test_skip_existing_leaves_current_frames_and_remakes_stale_ones(repaired):
     assert result.exit_code == 0 and remade(before, stamps(repaired)) == {"segment"}
 
 
+@pytest.mark.parametrize("damage, stages", [
+    ("poses_cut", {"align", "repair"}),
+    ("masks_png_empty", {"segment", "repair"}),
+    ("mesh_gone", {"reconstruct", "repair"}),
+])
+def test_damaged_stage_outputs_are_made_again(repaired, damage, stages):
+    """A run stopped hard or a full disk can leave a stage output cut off, empty or gone:
+    repair-depth makes that stage again instead of failing the frame (the stages after it
+    read the same files as before, so stay)."""
+    if damage == "poses_cut":
+        path = repaired / RECORDS["align"]
+        path.write_bytes(path.read_bytes()[:200])
+    elif damage == "masks_png_empty":
+        (repaired / f"masks/{FRAME}.png").write_bytes(b"")
+    else:
+        meshes = json.loads((repaired / RECORDS["reconstruct"]).read_text())["objects"]
+        (repaired / f"meshes/{FRAME}/{sorted(meshes)[0]}.ply").unlink()
+    before = stamps(repaired)
+    result = run("repair-depth", repaired, "-v")
+    assert result.exit_code == 0, result.output
+    assert remade(before, stamps(repaired)) == stages
+    assert "made again" in result.output
+    assert json.loads((repaired / RECORDS["align"]).read_text())["objects"]
+
+
+def test_skip_existing_makes_an_empty_output_again(repaired):
+    path = repaired / f"repaired/{FRAME}.png"
+    path.write_bytes(b"")
+    result = run("repair-depth", repaired, "--skip-existing", "-q")
+    assert result.exit_code == 0, result.output
+    assert path.stat().st_size > 0 and cv2.imread(str(path), cv2.IMREAD_UNCHANGED) is not None
+
+
 def test_keep_stale_keeps_upstream_outputs_with_a_warning(repaired):
     before = stamps(repaired)
     result = run("repair-depth", repaired, "--keep-stale", "--set", "align.refine_evals=40")
