@@ -64,3 +64,30 @@ def test_the_stand_in_casts_the_silhouettes_of_the_mesh_with_fewer_triangles(nam
         areas.append(sil.sum() / full.sum() - 1)
     assert min(ious) > 0.985 and np.mean(ious) > 0.99  # 0.991 / 0.992 measured (goblet)
     assert abs(np.mean(areas)) < 0.005  # -0.3% (goblet)
+
+
+def test_a_scan_clustered_casts_its_silhouettes_with_a_sixth_of_its_triangles():
+    """A mesh with no stand-in of revolution and many triangles (a scan: a handled mug, finely
+    subdivided, 141 000 triangles) clustered on 64 cubes to its extent: an eighth of the
+    triangles, the same silhouettes (IoU 0.989 at least, 0.991 on average, as the placing
+    draws them in 170 px windows)."""
+    from sr3d_cli.geometry.simplify import clustered_stand_in
+
+    handle = trimesh.creation.torus(0.25, 0.05, major_sections=48, minor_sections=16)
+    handle.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
+    handle.apply_translation([0.36, 0, 0.5])
+    scan = trimesh.util.concatenate([CUP, handle]).subdivide().subdivide().subdivide()
+    stand_in = clustered_stand_in(scan, 64)
+    assert len(scan.faces) > 100000 and len(stand_in.faces) < len(scan.faces) / 6
+    rng = np.random.default_rng(4)
+    ious = []
+    for _ in range(12):
+        R = rotation_about(np.array([0, 0, 1.0]), rng.uniform(0, 2 * np.pi)) @ \
+            rotation_about(np.array([1.0, 0, 0]), rng.uniform(-2.5, -0.3))
+        t = np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), 0.6])
+        full_uv, _ = project_mesh(scan.vertices, R, t, 0.12, K)
+        origin = tuple(full_uv.min(axis=0) - 30)
+        full = fill_silhouette(full_uv, scan.faces, (170, 170), origin)
+        uv, _ = project_mesh(stand_in.vertices, R, t, 0.12, K)
+        ious.append(mask_iou(full, fill_silhouette(uv, stand_in.faces, (170, 170), origin)))
+    assert min(ious) > 0.98, ious

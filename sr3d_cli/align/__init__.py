@@ -26,7 +26,7 @@ from sr3d_cli.align.view_matching import (ViewMatcher, candidates_plane, candida
 from sr3d_cli.config import AlignConfig
 from sr3d_cli.geometry.camera import unproject
 from sr3d_cli.geometry.plane import Plane
-from sr3d_cli.geometry.simplify import revolution_stand_in
+from sr3d_cli.geometry.simplify import clustered_stand_in, revolution_stand_in
 from sr3d_cli.geometry.silhouette import (face_twins, fill_silhouette, mask_iou, project_mesh,
                                           surface_depth)
 from sr3d_cli.geometry.transforms import make_T, rotation_about, unit
@@ -72,6 +72,10 @@ STAND_IN_TOLERANCE = 0.002  # outer-profile simplification (object units): 0.2 p
 STAND_IN_SECTIONS = 24  # sections of the stand-in about its axis (written meshes have 48)
 STAND_IN_MAX_POINTS = 600  # distinct (r, z) above which the profile is not extracted (its
 # cost grows with points times edges; written meshes have 40-110)
+CLUSTER_ABOVE = 20000  # triangles over which a mesh with no stand-in of revolution (a scan)
+# draws its silhouettes from a clustered stand-in: sr3d's own meshes hold at most 12 000; a
+# scanned container's 100 000 took 70 s to place, 8-9 s so, placed as well (2-8 mm off)
+CLUSTER_CELLS = 64  # grid cubes to the largest extent of that stand-in (clustered_stand_in)
 
 
 class AlignError(ValueError):
@@ -150,10 +154,13 @@ class _Subject:
            stand_in: bool) -> "_Subject":
         """The subject of ``mesh`` and ``mask (H, W) bool``; with ``stand_in`` (``mesh`` is
         axisymmetric) its silhouettes are drawn from :func:`revolution_stand_in` where there is
-        one."""
+        one, else, for a mesh of over :data:`CLUSTER_ABOVE` triangles (a scan), from
+        :func:`clustered_stand_in`; its surface is always read from the mesh itself."""
         ys, xs = np.nonzero(mask)
         stand_in = revolution_stand_in(mesh, STAND_IN_TOLERANCE, STAND_IN_SECTIONS,
                                        STAND_IN_MAX_POINTS) if stand_in else None
+        if stand_in is None and len(mesh.faces) > CLUSTER_ABOVE:
+            stand_in = clustered_stand_in(mesh, CLUSTER_CELLS)
         drawn = mesh if stand_in is None else stand_in
         sil_faces = np.asarray(drawn.faces)
         return cls(K, np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces),

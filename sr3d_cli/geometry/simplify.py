@@ -80,3 +80,27 @@ def revolution_stand_in(mesh: trimesh.Trimesh, tolerance: float, sections: int,
     # circle on average over the turns about the axis (the mean width of a regular polygon is
     # its perimeter over pi)
     return revolve(kept, sections)
+
+
+def clustered_stand_in(mesh: trimesh.Trimesh, cells: int) -> trimesh.Trimesh:
+    """A coarser stand-in of any mesh for silhouettes: its vertices merged on a grid of cubes
+    ``cells`` to its largest extent (each cluster at its vertices' mean), the triangles that
+    keep three corners kept as they wind, repeats dropped. The outline moves by at most a cube
+    (with 64, about a pixel of a 160 px window): a finely subdivided mug of 141 000 triangles
+    keeps 17 000 and draws its silhouettes at IoU 0.989 or more with the whole mesh's."""
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    low = vertices.min(axis=0)
+    size = max(float(np.ptp(vertices, axis=0).max()) / cells, 1e-12)
+    keys = np.floor((vertices - low) / size).astype(np.int64)
+    _, cluster = np.unique(keys, axis=0, return_inverse=True)
+    cluster = cluster.ravel()
+    count = np.bincount(cluster)
+    merged = np.stack([np.bincount(cluster, weights=vertices[:, j]) for j in range(3)], 1)
+    faces = cluster[np.asarray(mesh.faces)]
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) &
+                  (faces[:, 2] != faces[:, 0])]
+    # a triangle and its turns are one (same winding): keep each once
+    turn = np.argmin(faces, axis=1)
+    rolled = np.stack([faces[np.arange(len(faces)), (turn + k) % 3] for k in range(3)], 1)
+    faces = np.unique(rolled, axis=0)
+    return trimesh.Trimesh(merged / count[:, None], faces, process=False)
