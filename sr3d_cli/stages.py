@@ -338,28 +338,28 @@ def record_path(source: SceneSource, frame_id: str, stage: str):
 
 
 def stale(cfg, source: SceneSource, frame_id: str, stage: str) -> str | None:
-    """Why a stage's output of this frame must be made again: :data:`MISSING`, its files
-    unreadable (:func:`broken`), the first difference from its record, or None (current, or
-    made elsewhere without a record)."""
+    """Why a stage's output of this frame must be made again: :data:`MISSING`, damaged
+    (:func:`broken`), the first difference from its record, or None (current, or made
+    elsewhere without a record)."""
     path = record_path(source, frame_id, stage)
     if path is None:
         return MISSING
-    why = broken(path, stage)
-    if why is not None:
-        return why
-    return provenance.stale_reason(provenance.read_record(path),
-                                   stage_record(cfg, source, frame_id, stage))
-
-
-def broken(path: Path, stage: str) -> str | None:
-    """Why the output of ``stage`` whose JSON is ``path`` cannot be used (None: it can): the
-    JSON cut off or not JSON, or a file it stands for empty or gone (the masks' PNG beside it;
-    the meshes it lists). A run stopped hard or a disk that filled up leaves such files; they
-    are made again rather than failing the frame."""
     try:
         document = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return f"{path.name} cannot be read"
+    why = broken(path, document, stage)
+    if why is not None:
+        return why
+    return provenance.stale_reason(provenance.record_of(document),
+                                   stage_record(cfg, source, frame_id, stage))
+
+
+def broken(path: Path, document, stage: str) -> str | None:
+    """Why the output of ``stage`` whose JSON ``path`` holds ``document`` cannot be used (None:
+    it can): no mapping, or a file it stands for empty or gone (the masks' PNG beside it; the
+    meshes it lists). A run stopped hard or a disk that filled up leaves such files; they are
+    made again rather than failing the frame."""
     if not isinstance(document, dict):
         return f"{path.name} holds no mapping"
     data = []  # each file that must be there, as the ways it may be written

@@ -75,14 +75,9 @@ def made_from(cfg: Config, stage: str, inputs: dict[str, Path | None | list]) ->
     return {"config": config_keys(cfg, stage), "inputs": prints}
 
 
-def read_record(path: Path | None) -> dict | None:
-    """The ``made_from`` record of a stage output JSON (None: no file, or no record)."""
-    if path is None:
-        return None
-    try:
-        record = json.loads(Path(path).read_text(encoding="utf-8")).get(RECORD_KEY)
-    except (OSError, ValueError, AttributeError):
-        return None
+def record_of(document) -> dict | None:
+    """The ``made_from`` record of a stage output JSON's ``document`` (None: none)."""
+    record = document.get(RECORD_KEY) if isinstance(document, dict) else None
     return record if isinstance(record, dict) else None
 
 
