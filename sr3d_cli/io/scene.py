@@ -86,26 +86,24 @@ class SceneSource:
                       and not p.name.startswith(".") and p.stem not in known)
 
     @staticmethod
-    def _found(folder: Path, frame_id: str, suffixes) -> list[Path]:
+    def _found(folder: Path, frame_id: str, suffixes):
         """The files ``folder/<frame_id><suffix>`` that exist, in the order of ``suffixes``,
-        each suffix in lower or upper case (frames are listed whatever its case)."""
-        out = []
+        each suffix in lower or upper case (frames are listed whatever its case); a generator,
+        so that a caller wanting the first looks no further."""
         for suffix in suffixes:
             for case in dict.fromkeys((suffix, suffix.upper())):
                 p = folder / f"{frame_id}{case}"
                 if p.is_file():
-                    out.append(p)
+                    yield p
                     break
-        return out
 
     def _find(self, folder: Path, frame_id: str, suffixes) -> Path | None:
-        found = self._found(folder, frame_id, suffixes)
-        return found[0] if found else None
+        return next(self._found(folder, frame_id, suffixes), None)
 
     def _input(self, folder: Path, frame_id: str, suffixes) -> Path:
         """A frame's input file under ``folder``; a notice names the others where several
         kinds exist (``000001.png`` and ``000001.npy``), as only the first is read."""
-        found = self._found(folder, frame_id, suffixes)
+        found = list(self._found(folder, frame_id, suffixes))
         if len(found) > 1:
             self._notice(f"{folder}: {' and '.join(p.name for p in found)} are the same "
                          f"frame; reading {found[0].name}")
